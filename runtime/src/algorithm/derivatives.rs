@@ -51,7 +51,7 @@ use crate::tasks::Derivatives;
 
 /// The most outputs the structured solve takes (the order of `Rᵀ M R`), as forward dynamics'
 /// elimination.
-const P_MAX: usize = 16;
+pub(crate) const P_MAX: usize = 16;
 
 /// The derivatives of forward dynamics at one state and the buffers that compute them:
 /// [`ForwardDynamicsDerivatives::new`] allocates once, [`forward_dynamics_derivatives`] never.
@@ -107,6 +107,8 @@ pub struct ForwardDynamicsDerivatives<const N: usize, const M: usize> {
     wr: Vec<f64>,
     wb: Vec<f64>,
     wx: Vec<f64>,
+    /// `X0 = G_y⁻¹ B` (rows of the blocks' coordinates; the others are not written).
+    wx0: Vec<f64>,
     wz: Vec<f64>,
     /// LU factors of `[M Gᵀ; G 0]`, column-major, `(N + M)²`.
     kkt: Vec<f64>,
@@ -142,6 +144,7 @@ impl<const N: usize, const M: usize> ForwardDynamicsDerivatives<N, M> {
             wr: vec![0.0; N * row_width(N, N)],
             wb: vec![0.0; M * row_width(N, N)],
             wx: vec![0.0; N * row_width(N, N)],
+            wx0: vec![0.0; N * row_width(N, N)],
             wz: vec![0.0; P_MAX * row_width(N, N)],
             kkt: vec![0.0; k * k],
             piv: vec![0; k],
@@ -164,6 +167,13 @@ impl<const N: usize, const M: usize> ForwardDynamicsDerivatives<N, M> {
     /// order) and the largest 1-norms of `K_b` and `K_b⁻¹`; `None` after the dense LU.
     pub(crate) fn reduced_parts(&self) -> Option<(&[f64], &[f64], (f64, f64))> {
         (self.method == DynamicsMethod::Reduced).then_some((&self.rt, &self.inv, self.norms))
+    }
+
+    /// After the elimination: `∂Ẍ/∂(X, Ẋ, U) = X0 + R Z` split, as rows of the row width:
+    /// `(X0, Z)` with `X0`'s rows those of the blocks' coordinates only (the others are zero
+    /// and not written) and `Z` the `P` rows of the outputs; `None` after the dense LU.
+    pub(crate) fn low_rank_rows(&self) -> Option<(&[f64], &[f64])> {
+        (self.method == DynamicsMethod::Reduced).then_some((&self.wx0, &self.wz))
     }
 }
 
@@ -563,9 +573,11 @@ fn reduced_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
         wr,
         wb,
         wx,
+        wx0,
         wz,
         ..
     } = out;
+    let wx0 = &mut wx0[..N * w];
     let (wa, wr, wb, wx, wz) = (
         &mut wa[..N * w],
         &mut wr[..N * w],
@@ -595,7 +607,7 @@ fn reduced_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
         let kinv = &inv[off..off + k * k];
         off += k * k;
         for (r, &jr) in blk.cols.iter().enumerate() {
-            let xr = &mut wx[jr * w..(jr + 1) * w];
+            let xr = &mut wx0[jr * w..(jr + 1) * w];
             t.assign();
             for (c, &ic) in blk.rows.iter().enumerate() {
                 t.push(kinv[c * k + r], ic, xr, wb, w);
@@ -619,13 +631,13 @@ fn reduced_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
             }
             for &c in blk.iter() {
                 if model.ik_block_of[c] < ik.len() {
-                    t.push(-mass[c][r], c, row, wx, w);
+                    t.push(-mass[c][r], c, row, wx0, w);
                 }
             }
             if fits {
-                t.flush_from(row, base, wx, w);
+                t.flush_from(row, base, wx0, w);
             } else {
-                t.flush(row, wx, w);
+                t.flush(row, wx0, w);
             }
         }
     }
@@ -670,13 +682,15 @@ fn reduced_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
     // X = X0 + R Z: Rᵀ read by columns (entry (c, i) at rt[c N + i]).
     for i in 0..N {
         let xr = &mut wx[i * w..(i + 1) * w];
-        if model.ik_block_of[i] >= ik.len() {
-            t.assign(); // X0 is zero here
-        }
         for c in 0..p {
             t.push(rt[c * N + i], c, xr, wz, w);
         }
-        t.flush(xr, wz, w);
+        if model.ik_block_of[i] < ik.len() {
+            t.flush_from(xr, &wx0[i * w..(i + 1) * w], wz, w);
+        } else {
+            t.assign(); // X0 is zero here
+            t.flush(xr, wz, w);
+        }
     }
     // Lambda: K_bᵀ lambda_b = (A - M X)[C_b], into the rows of B.
     for blk in blocks {

@@ -14,10 +14,16 @@
 //! `D s_i = [I 0] + c_i h D k_{i-1}` and `D k_i = J(s_i) D s_i + [0 B(s_i)]`, where
 //! `J = [0 I; ∂Ẍ/∂X ∂Ẍ/∂Ẋ]` and `B = [0; ∂Ẍ/∂U]` come from
 //! [`forward_dynamics_derivatives_with`] at each stage (four for RK4, one for Euler).
+//!
+//! The RK4 products run over rows (all `2N + na` directions of a row at once, the solve's own
+//! layout) and use the elimination's split `[∂Ẍ/∂X ∂Ẍ/∂Ẋ] = X0 + R Z`: `Z D k` on the `P`
+//! outputs' rows, then `X0`'s rows (non-zero only on the blocks' coordinates, and sparse there)
+//! and `R` times it, rather than the dense `N × 2N` product (the dense product after the
+//! dense LU).
 
 use super::baumgarte::Baumgarte;
 use super::derivatives::{
-    DerivativesSolver, ForwardDynamicsDerivatives, Terms, forward_dynamics_derivatives_with,
+    DerivativesSolver, ForwardDynamicsDerivatives, P_MAX, Terms, forward_dynamics_derivatives_with,
     row_width,
 };
 use super::forward_dynamics::forward_dynamics;
@@ -46,6 +52,8 @@ pub struct StepDerivatives<const N: usize, const M: usize> {
     /// The stages' `D Ẍ_i = ∂Ẍ(s_i)/∂(s, U)` as rows (see `rk4_step_derivatives`): four blocks
     /// of N rows of the derivatives' row width.
     kv: Vec<f64>,
+    /// `c h Z D k_{i-1}` (the outputs' rows of the low-rank part, see `rk4_step_derivatives`).
+    tz: Vec<f64>,
 }
 
 impl<const N: usize, const M: usize> StepDerivatives<N, M> {
@@ -59,6 +67,7 @@ impl<const N: usize, const M: usize> StepDerivatives<N, M> {
             jacobian: vec![0.0; len],
             derivatives: ForwardDynamicsDerivatives::new(),
             kv: vec![0.0; 4 * N * row_width(N, N)],
+            tz: vec![0.0; P_MAX * row_width(N, N)],
         }
     }
 
@@ -171,23 +180,43 @@ pub fn rk4_step_derivatives<K: Derivatives<N, M>, const N: usize, const M: usize
         let wx = &out.derivatives.xddot_rows()[..N * w];
         let (prev, rest) = out.kv.split_at_mut(i * N * w);
         let cur = &mut rest[..N * w];
-        let cp = if i > 1 { stages[i - 1].0 } else { 0.0 };
-        for (row, src) in cur.chunks_exact_mut(w).zip(wx.chunks_exact(w)) {
-            row.copy_from_slice(src);
-            if i == 0 {
-                continue;
-            }
-            let ch = c * dt;
-            for k in 0..N {
-                row[N + k] += ch * src[k];
-            }
-            for k in 0..N {
-                if i > 1 {
-                    t.push(ch * cp * dt * src[k], (i - 2) * N + k, row, prev, w);
+        cur.copy_from_slice(wx);
+        if i > 0 {
+            let jd = JdProduct {
+                ch: c * dt,
+                cph: if i > 1 { stages[i - 1].0 * dt } else { 0.0 },
+                i,
+                w,
+            };
+            let p = model.structure().outputs.len();
+            match (
+                out.derivatives.low_rank_rows(),
+                out.derivatives.reduced_parts(),
+            ) {
+                (Some((x0, z)), Some((rt, _, _))) if p <= P_MAX => {
+                    // J_i = X0 + R Z (X0 zero off the blocks' rows): Z D k_{i-1} first
+                    // (P rows), then X0's rows and R times it.
+                    let tz = &mut out.tz[..p * w];
+                    for (trow, zrow) in tz.chunks_exact_mut(w).zip(z.chunks_exact(w)) {
+                        trow.fill(0.0);
+                        jd.add::<N>(&mut t, zrow, trow, prev);
+                    }
+                    for (r, row) in cur.chunks_exact_mut(w).enumerate() {
+                        if model.ik_block_of[r] < model.structure().ik_blocks.len() {
+                            jd.add::<N>(&mut t, &x0[r * w..(r + 1) * w], row, prev);
+                        }
+                        for c in 0..p {
+                            t.push(rt[c * N + r], c, row, tz, w);
+                        }
+                        t.flush(row, tz, w);
+                    }
                 }
-                t.push(ch * src[N + k], (i - 1) * N + k, row, prev, w);
+                _ => {
+                    for (row, src) in cur.chunks_exact_mut(w).zip(wx.chunks_exact(w)) {
+                        jd.add::<N>(&mut t, src, row, prev);
+                    }
+                }
             }
-            t.flush(row, prev, w);
         }
         for j in 0..N {
             x1[j] += dt / 6.0 * b * vs[j];
@@ -220,6 +249,35 @@ pub fn rk4_step_derivatives<K: Derivatives<N, M>, const N: usize, const M: usize
     out.x = x1;
     out.xdot = v1;
     finite(&out.jacobian[..n2 * cols])
+}
+
+/// `row += c h (J D k_{i-1})` for a row `J` of `[∂Ẍ/∂X ∂Ẍ/∂Ẋ]` (the first 2N entries of
+/// `src`), with `D k_{i-1} = (D Ẋ_{i-1}, D Ẍ_{i-1})`, `D Ẋ_{i-1} = E_v + c_{i-1} h D Ẍ_{i-2}`
+/// and the earlier stages' `D Ẍ` in `prev` (N rows each).
+struct JdProduct {
+    /// `c_i h`.
+    ch: f64,
+    /// `c_{i-1} h` (zero at the second stage: `D Ẋ_1 = E_v`).
+    cph: f64,
+    i: usize,
+    w: usize,
+}
+
+impl JdProduct {
+    #[inline(always)]
+    fn add<const N: usize>(&self, t: &mut Terms, src: &[f64], row: &mut [f64], prev: &[f64]) {
+        let (ch, i, w) = (self.ch, self.i, self.w);
+        for k in 0..N {
+            row[N + k] += ch * src[k];
+        }
+        for k in 0..N {
+            if self.cph != 0.0 {
+                t.push(ch * self.cph * src[k], (i - 2) * N + k, row, prev, w);
+            }
+            t.push(ch * src[N + k], (i - 1) * N + k, row, prev, w);
+        }
+        t.flush(row, prev, w);
+    }
 }
 
 /// One semi-implicit Euler step ([`semi_implicit_euler_step`]) and its Jacobians `F_x`, `F_u`
