@@ -53,6 +53,9 @@ use crate::tasks::Derivatives;
 /// elimination.
 pub(crate) const P_MAX: usize = 16;
 
+/// `(Rᵀ, the blocks' K_b⁻¹, (max ‖K_b‖₁, max ‖K_b⁻¹‖₁))` of the elimination.
+pub(crate) type ReducedParts<'a> = (&'a [f64], &'a [f64], (f64, f64));
+
 /// The derivatives of forward dynamics at one state and the buffers that compute them:
 /// [`ForwardDynamicsDerivatives::new`] allocates once, [`forward_dynamics_derivatives`] never.
 #[derive(Debug, Clone)]
@@ -165,7 +168,7 @@ impl<const N: usize, const M: usize> ForwardDynamicsDerivatives<N, M> {
     /// After the elimination (`method == Reduced`): `Rᵀ` (the tangent map onto the outputs,
     /// `P` rows of length N), the blocks' inverses `K_b⁻¹` (column-major, packed in block
     /// order) and the largest 1-norms of `K_b` and `K_b⁻¹`; `None` after the dense LU.
-    pub(crate) fn reduced_parts(&self) -> Option<(&[f64], &[f64], (f64, f64))> {
+    pub(crate) fn reduced_parts(&self) -> Option<ReducedParts<'_>> {
         (self.method == DynamicsMethod::Reduced).then_some((&self.rt, &self.inv, self.norms))
     }
 
