@@ -51,7 +51,10 @@ use crate::tasks::Derivatives;
 
 /// The most outputs the structured solve takes (the order of `Rᵀ M R`), as forward dynamics'
 /// elimination.
-const P_MAX: usize = 16;
+pub(crate) const P_MAX: usize = 16;
+
+/// `(Rᵀ, the blocks' K_b⁻¹, (max ‖K_b‖₁, max ‖K_b⁻¹‖₁))` of the elimination.
+pub(crate) type ReducedParts<'a> = (&'a [f64], &'a [f64], (f64, f64));
 
 /// The derivatives of forward dynamics at one state and the buffers that compute them:
 /// [`ForwardDynamicsDerivatives::new`] allocates once, [`forward_dynamics_derivatives`] never.
@@ -90,6 +93,9 @@ pub struct ForwardDynamicsDerivatives<const N: usize, const M: usize> {
     /// `SaddlePoint`: the Hager/Higham estimate of the 1-norm condition number of
     /// `[M Gᵀ; G 0]`.
     pub cond: f64,
+    /// `Reduced`: the largest 1-norms of the blocks `K_b` and of their inverses (the exact
+    /// 1-norm condition number of the block-diagonal `G_y` is their product).
+    norms: (f64, f64),
     /// `K_b⁻¹` of every block, column-major, packed in block order.
     inv: Vec<f64>,
     /// `Rᵀ`: `P` rows of length N (row `c`: the motion of output `c`).
@@ -104,6 +110,8 @@ pub struct ForwardDynamicsDerivatives<const N: usize, const M: usize> {
     wr: Vec<f64>,
     wb: Vec<f64>,
     wx: Vec<f64>,
+    /// `X0 = G_y⁻¹ B` (rows of the blocks' coordinates; the others are not written).
+    wx0: Vec<f64>,
     wz: Vec<f64>,
     /// LU factors of `[M Gᵀ; G 0]`, column-major, `(N + M)²`.
     kkt: Vec<f64>,
@@ -130,6 +138,7 @@ impl<const N: usize, const M: usize> ForwardDynamicsDerivatives<N, M> {
             method: DynamicsMethod::Reduced,
             cond_blocks: f64::NAN,
             cond: f64::NAN,
+            norms: (f64::NAN, f64::NAN),
             inv: vec![0.0; M * linalg::INVERT_MAX],
             rt: vec![0.0; P_MAX * N],
             mrt: vec![0.0; P_MAX * N],
@@ -138,12 +147,36 @@ impl<const N: usize, const M: usize> ForwardDynamicsDerivatives<N, M> {
             wr: vec![0.0; N * row_width(N, N)],
             wb: vec![0.0; M * row_width(N, N)],
             wx: vec![0.0; N * row_width(N, N)],
+            wx0: vec![0.0; N * row_width(N, N)],
             wz: vec![0.0; P_MAX * row_width(N, N)],
             kkt: vec![0.0; k * k],
             piv: vec![0; k],
             rhs: vec![0.0; k],
             work: vec![0.0; 2 * k],
         }
+    }
+}
+
+impl<const N: usize, const M: usize> ForwardDynamicsDerivatives<N, M> {
+    /// `∂Ẍ/∂(X, Ẋ, U)` as rows of the width `row_width(N, na)` (`na` control forces): row `i`
+    /// holds `∂Ẍ_i/∂X` (N entries), `∂Ẍ_i/∂Ẋ` (N), `∂Ẍ_i/∂U` (na) and zeros; what the last
+    /// successful call wrote, on either path.
+    pub(crate) fn xddot_rows(&self) -> &[f64] {
+        &self.wx
+    }
+
+    /// After the elimination (`method == Reduced`): `Rᵀ` (the tangent map onto the outputs,
+    /// `P` rows of length N), the blocks' inverses `K_b⁻¹` (column-major, packed in block
+    /// order) and the largest 1-norms of `K_b` and `K_b⁻¹`; `None` after the dense LU.
+    pub(crate) fn reduced_parts(&self) -> Option<ReducedParts<'_>> {
+        (self.method == DynamicsMethod::Reduced).then_some((&self.rt, &self.inv, self.norms))
+    }
+
+    /// After the elimination: `∂Ẍ/∂(X, Ẋ, U) = X0 + R Z` split, as rows of the row width:
+    /// `(X0, Z)` with `X0`'s rows those of the blocks' coordinates only (the others are zero
+    /// and not written) and `Z` the `P` rows of the outputs; `None` after the dense LU.
+    pub(crate) fn low_rank_rows(&self) -> Option<(&[f64], &[f64])> {
+        (self.method == DynamicsMethod::Reduced).then_some((&self.wx0, &self.wz))
     }
 }
 
@@ -209,8 +242,8 @@ pub fn forward_dynamics_derivatives_with<K: Derivatives<N, M>, const N: usize, c
     let Baumgarte { alpha, beta } = baumgarte;
     // The kernel writes only the structural non-zeros: clear what the gains' terms of an
     // earlier call may have left elsewhere.
-    out.dc_dx.fill(0.0);
-    out.dc_dxdot.fill(0.0);
+    out.dc_dx.as_mut_slice().fill(0.0);
+    out.dc_dxdot.as_mut_slice().fill(0.0);
     model.kernels().dynamics_derivatives(
         &data.x,
         &data.xdot,
@@ -289,6 +322,7 @@ fn reduced_factor<K: Derivatives<N, M>, const N: usize, const M: usize>(
     }
     // K_b⁻¹ (exact condition numbers) and the blocks' entries of Rᵀ: -K_b⁻¹ G[R_b, z_c].
     let mut worst = 0.0_f64;
+    let mut norms = (0.0_f64, 0.0_f64);
     let mut off = 0;
     for blk in ik {
         let k = blk.rows.len();
@@ -299,11 +333,13 @@ fn reduced_factor<K: Derivatives<N, M>, const N: usize, const M: usize>(
             }
         }
         let anorm = linalg::norm1(inv, k).ok()?;
-        let cond = anorm * linalg::invert_small(inv, k).ok()?;
+        let inorm = linalg::invert_small(inv, k).ok()?;
+        let cond = anorm * inorm;
         if cond.is_nan() || cond > FD_K_COND_MAX.min(cond_max) {
             return None;
         }
         worst = worst.max(cond);
+        norms = (norms.0.max(anorm), norms.1.max(inorm));
         for (row, &zj) in rt.chunks_exact_mut(N).zip(z) {
             let mut w = [0.0; linalg::INVERT_MAX];
             for (col, &i) in inv.chunks_exact(k).zip(blk.rows) {
@@ -352,6 +388,7 @@ fn reduced_factor<K: Derivatives<N, M>, const N: usize, const M: usize>(
             return None;
         }
     }
+    out.norms = norms;
     Some((worst, cond))
 }
 
@@ -361,25 +398,36 @@ const TERMS: usize = 64;
 /// A sum `Σ a_t src[row_t]` of rows of a row-major matrix with rows of length `w`, added into a
 /// row chunk by chunk: each chunk of 8 entries stays in registers over all the terms (one load
 /// per term and entry instead of the load and store of an axpy per term).
-struct Terms {
+pub(crate) struct Terms {
     coef: [f64; TERMS],
-    row: [usize; TERMS],
+    /// The terms' row offsets `row_t w` into `src`.
+    off: [usize; TERMS],
     n: usize,
+    /// The next flush overwrites the row (`out = Σ ...`) rather than adding into it.
+    assign: bool,
 }
 
 impl Terms {
     #[inline(always)]
-    fn new() -> Self {
+    pub(crate) fn new() -> Self {
         Self {
             coef: [0.0; TERMS],
-            row: [0; TERMS],
+            off: [0; TERMS],
             n: 0,
+            assign: false,
         }
+    }
+
+    /// The row the next terms go into is overwritten by their sum (no need to clear it first);
+    /// holds until the next flush.
+    #[inline(always)]
+    pub(crate) fn assign(&mut self) {
+        self.assign = true;
     }
 
     /// Adds the term `a src[row]` (nothing for `a == 0`), first flushing into `out` when full.
     #[inline(always)]
-    fn push(&mut self, a: f64, row: usize, out: &mut [f64], src: &[f64], w: usize) {
+    pub(crate) fn push(&mut self, a: f64, row: usize, out: &mut [f64], src: &[f64], w: usize) {
         if a == 0.0 {
             return;
         }
@@ -387,43 +435,97 @@ impl Terms {
             self.flush(out, src, w);
         }
         self.coef[self.n] = a;
-        self.row[self.n] = row;
+        self.off[self.n] = row * w;
         self.n += 1;
     }
 
-    /// `out += Σ a_t src[row_t]`, and no terms left.
+    /// `out += Σ a_t src[row_t]` (`out = ...` after [`Terms::assign`]), and no terms left.
     #[inline(always)]
-    fn flush(&mut self, out: &mut [f64], src: &[f64], w: usize) {
+    pub(crate) fn flush(&mut self, out: &mut [f64], src: &[f64], w: usize) {
+        self.flush_base(out, None, src, w);
+    }
+
+    /// `out = base + Σ a_t src[row_t]` when every term is still pending (no flush since the
+    /// first push: at most `TERMS` of them), else `out += ...` after copying `base` first.
+    #[inline(always)]
+    pub(crate) fn flush_from(&mut self, out: &mut [f64], base: &[f64], src: &[f64], w: usize) {
+        self.flush_base(out, Some(base), src, w);
+    }
+
+    #[inline(always)]
+    fn flush_base(&mut self, out: &mut [f64], base: Option<&[f64]>, src: &[f64], w: usize) {
         let n = self.n;
+        let assign = self.assign;
         self.n = 0;
+        self.assign = false;
         if n == 0 {
+            if let Some(b) = base {
+                out[..w].copy_from_slice(&b[..w]);
+            } else if assign {
+                out.iter_mut().for_each(|v| *v = 0.0);
+            }
             return;
         }
-        let (coef, rows) = (&self.coef[..n], &self.row[..n]);
-        let (chunks, tail) = out.as_chunks_mut::<8>();
-        for (q, acc) in chunks.iter_mut().enumerate() {
-            let mut v = *acc;
-            for (&a, &r) in coef.iter().zip(rows) {
-                let x = &src[r * w + 8 * q..r * w + 8 * q + 8];
-                for (vi, &xi) in v.iter_mut().zip(x) {
-                    *vi += a * xi;
-                }
-            }
-            *acc = v;
+        let (coef, offs) = (&self.coef[..n], &self.off[..n]);
+        let out = &mut out[..w];
+        // Chunks of 16 (8 registers of two lanes over the terms), then of 8, then single entries.
+        let (wide, rest) = out.as_chunks_mut::<16>();
+        for (q, acc) in wide.iter_mut().enumerate() {
+            chunk(acc, assign, base, coef, offs, src, 16 * q);
         }
-        let t0 = 8 * chunks.len();
+        let t0 = 16 * wide.len();
+        let (narrow, tail) = rest.as_chunks_mut::<8>();
+        for (q, acc) in narrow.iter_mut().enumerate() {
+            chunk(acc, assign, base, coef, offs, src, t0 + 8 * q);
+        }
+        let t0 = t0 + 8 * narrow.len();
         for (e, o) in tail.iter_mut().enumerate() {
-            let mut v = *o;
-            for (&a, &r) in coef.iter().zip(rows) {
-                v += a * src[r * w + t0 + e];
+            let mut v = match base {
+                Some(b) => b[t0 + e],
+                None if assign => 0.0,
+                None => *o,
+            };
+            for (&a, &off) in coef.iter().zip(offs) {
+                v += a * src[off + t0 + e];
             }
             *o = v;
         }
     }
 }
 
+/// `acc (= base, 0 or itself) + Σ a_t src[off_t + at ..][..C]`, the chunk in registers over the
+/// terms.
+#[inline(always)]
+fn chunk<const C: usize>(
+    acc: &mut [f64; C],
+    assign: bool,
+    base: Option<&[f64]>,
+    coef: &[f64],
+    offs: &[usize],
+    src: &[f64],
+    at: usize,
+) {
+    let mut v = match base.and_then(|b| b.get(at..at + C)) {
+        Some(b) => {
+            let mut v = [0.0; C];
+            v.copy_from_slice(b);
+            v
+        }
+        None if assign => [0.0; C],
+        None => *acc,
+    };
+    for (&a, &o) in coef.iter().zip(offs) {
+        if let Some(x) = src.get(o + at..o + at + C) {
+            for (vi, &xi) in v.iter_mut().zip(x) {
+                *vi += a * xi;
+            }
+        }
+    }
+    *acc = v;
+}
+
 /// The length of the rows of right-hand sides: `2 N + na` rounded up to a multiple of 8.
-const fn row_width(n: usize, na: usize) -> usize {
+pub(crate) const fn row_width(n: usize, na: usize) -> usize {
     (2 * n + na).div_ceil(8) * 8
 }
 
@@ -474,9 +576,11 @@ fn reduced_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
         wr,
         wb,
         wx,
+        wx0,
         wz,
         ..
     } = out;
+    let wx0 = &mut wx0[..N * w];
     let (wa, wr, wb, wx, wz) = (
         &mut wa[..N * w],
         &mut wr[..N * w],
@@ -485,61 +589,75 @@ fn reduced_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
         &mut wz[..p * w],
     );
     // A = -[∂r/∂X, ∂r/∂Ẋ, -S] and B = -[∂c/∂X, ∂c/∂Ẋ, 0], as rows.
-    for (j, (cx, cv)) in dr_dx.data.0.iter().zip(&dr_dxdot.data.0).enumerate() {
-        for (i, (&vx, &vv)) in cx.iter().zip(cv).enumerate() {
-            wa[i * w + j] = -vx;
-            wa[i * w + N + j] = -vv;
-        }
-    }
+    to_rows(&dr_dx.data.0, wa, w, 0, -1.0);
+    to_rows(&dr_dxdot.data.0, wa, w, N, -1.0);
     for i in 0..N {
         wa[i * w + 2 * N..(i + 1) * w].fill(0.0);
     }
     for (a, &j) in s.actuated.iter().enumerate() {
         wa[j * w + 2 * N + a] = gear_ratio(s.gear, a);
     }
-    for (j, (cx, cv)) in dc_dx.data.0.iter().zip(&dc_dxdot.data.0).enumerate() {
-        for (i, (&vx, &vv)) in cx.iter().zip(cv).enumerate() {
-            wb[i * w + j] = -vx;
-            wb[i * w + N + j] = -vv;
-        }
-    }
+    to_rows(&dc_dx.data.0, wb, w, 0, -1.0);
+    to_rows(&dc_dxdot.data.0, wb, w, N, -1.0);
     for i in 0..M {
         wb[i * w + 2 * N..(i + 1) * w].fill(0.0);
     }
     let mut t = Terms::new();
-    // X0 = G_y⁻¹ B, block by block (zero on the outputs).
-    wx.fill(0.0);
+    // X0 = G_y⁻¹ B, block by block (zero on the outputs: their rows are not read).
     let mut off = 0;
     for blk in ik {
         let k = blk.rows.len();
         let kinv = &inv[off..off + k * k];
         off += k * k;
         for (r, &jr) in blk.cols.iter().enumerate() {
-            let xr = &mut wx[jr * w..(jr + 1) * w];
+            let xr = &mut wx0[jr * w..(jr + 1) * w];
+            t.assign();
             for (c, &ic) in blk.rows.iter().enumerate() {
                 t.push(kinv[c * k + r], ic, xr, wb, w);
             }
             t.flush(xr, wb, w);
         }
     }
-    // W = A - M X0 (X0 is zero on the outputs).
-    wr.copy_from_slice(wa);
+    // W = A - M X0 into `wr` for the rows it changes (`in_wr`); `wa` holds the others.
+    let mut in_wr = [false; N];
     for blk in blocks {
+        let fits = blk.len() <= TERMS;
         for &r in blk.iter() {
+            if !blk.iter().any(|&c| model.ik_block_of[c] < ik.len()) {
+                break;
+            }
+            in_wr[r] = true;
             let row = &mut wr[r * w..(r + 1) * w];
+            let base = &wa[r * w..(r + 1) * w];
+            if !fits {
+                row.copy_from_slice(base);
+            }
             for &c in blk.iter() {
                 if model.ik_block_of[c] < ik.len() {
-                    t.push(-mass[c][r], c, row, wx, w);
+                    t.push(-mass[c][r], c, row, wx0, w);
                 }
             }
-            t.flush(row, wx, w);
+            if fits {
+                t.flush_from(row, base, wx0, w);
+            } else {
+                t.flush(row, wx0, w);
+            }
         }
     }
     // Z = H⁻¹ Rᵀ W.
-    wz.fill(0.0);
     for (c, zrow) in wz.chunks_exact_mut(w).enumerate() {
-        for (i, &rv) in rt[c * N..(c + 1) * N].iter().enumerate() {
-            t.push(rv, i, zrow, wr, w);
+        let rc = &rt[c * N..(c + 1) * N];
+        t.assign();
+        for (i, &rv) in rc.iter().enumerate() {
+            if !in_wr[i] {
+                t.push(rv, i, zrow, wa, w);
+            }
+        }
+        t.flush(zrow, wa, w);
+        for (i, &rv) in rc.iter().enumerate() {
+            if in_wr[i] {
+                t.push(rv, i, zrow, wr, w);
+            }
         }
         t.flush(zrow, wr, w);
     }
@@ -570,7 +688,12 @@ fn reduced_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
         for c in 0..p {
             t.push(rt[c * N + i], c, xr, wz, w);
         }
-        t.flush(xr, wz, w);
+        if model.ik_block_of[i] < ik.len() {
+            t.flush_from(xr, &wx0[i * w..(i + 1) * w], wz, w);
+        } else {
+            t.assign(); // X0 is zero here
+            t.flush(xr, wz, w);
+        }
     }
     // Lambda: K_bᵀ lambda_b = (A - M X)[C_b], into the rows of B.
     for blk in blocks {
@@ -579,11 +702,19 @@ fn reduced_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
                 continue; // an output: its equation is the reduced one
             }
             let row = &mut wr[r * w..(r + 1) * w];
-            row.copy_from_slice(&wa[r * w..(r + 1) * w]);
-            for &c in blk.iter() {
-                t.push(-mass[c][r], c, row, wx, w);
+            let base = &wa[r * w..(r + 1) * w];
+            if blk.len() > TERMS {
+                row.copy_from_slice(base);
+                for &c in blk.iter() {
+                    t.push(-mass[c][r], c, row, wx, w);
+                }
+                t.flush(row, wx, w);
+            } else {
+                for &c in blk.iter() {
+                    t.push(-mass[c][r], c, row, wx, w);
+                }
+                t.flush_from(row, base, wx, w);
             }
-            t.flush(row, wx, w);
         }
     }
     let mut off = 0;
@@ -593,7 +724,7 @@ fn reduced_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
         off += k * k;
         for (c, &ic) in blk.rows.iter().enumerate() {
             let lrow = &mut wb[ic * w..(ic + 1) * w];
-            lrow.fill(0.0);
+            t.assign();
             for (r, &jr) in blk.cols.iter().enumerate() {
                 t.push(kinv[c * k + r], jr, lrow, wr, w);
             }
@@ -606,30 +737,10 @@ fn reduced_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
         });
     }
     // Back to the column-major outputs.
-    for (j, (cx, cv)) in dxddot_dx
-        .data
-        .0
-        .iter_mut()
-        .zip(dxddot_dxdot.data.0.iter_mut())
-        .enumerate()
-    {
-        for (i, (vx, vv)) in cx.iter_mut().zip(cv.iter_mut()).enumerate() {
-            *vx = wx[i * w + j];
-            *vv = wx[i * w + N + j];
-        }
-    }
-    for (j, (cx, cv)) in dlambda_dx
-        .data
-        .0
-        .iter_mut()
-        .zip(dlambda_dxdot.data.0.iter_mut())
-        .enumerate()
-    {
-        for (i, (vx, vv)) in cx.iter_mut().zip(cv.iter_mut()).enumerate() {
-            *vx = wb[i * w + j];
-            *vv = wb[i * w + N + j];
-        }
-    }
+    from_rows(wx, w, 0, &mut dxddot_dx.data.0);
+    from_rows(wx, w, N, &mut dxddot_dxdot.data.0);
+    from_rows(wb, w, 0, &mut dlambda_dx.data.0);
+    from_rows(wb, w, N, &mut dlambda_dxdot.data.0);
     for a in 0..na {
         for (i, v) in dxddot_du.data.0[a].iter_mut().enumerate() {
             *v = wx[i * w + 2 * N + a];
@@ -639,6 +750,78 @@ fn reduced_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
         }
     }
     Ok(())
+}
+
+/// `rows[i w + at + j] = scale cols[j][i]`: a column-major matrix into rows, by 2 × 2 blocks
+/// (two loads of a pair, two stores of a pair).
+fn to_rows<const R: usize, const C: usize>(
+    cols: &[[f64; R]; C],
+    rows: &mut [f64],
+    w: usize,
+    at: usize,
+    scale: f64,
+) {
+    let (pairs, last) = cols.as_chunks::<2>();
+    for (jp, [c0, c1]) in pairs.iter().enumerate() {
+        let j = at + 2 * jp;
+        let (ip, ilast) = (R / 2, R % 2);
+        for q in 0..ip {
+            let i = 2 * q;
+            let (a0, a1) = (c0[i], c0[i + 1]);
+            let (b0, b1) = (c1[i], c1[i + 1]);
+            if let Some(d) = rows.get_mut(i * w + j..i * w + j + 2) {
+                d.copy_from_slice(&[scale * a0, scale * b0]);
+            }
+            if let Some(d) = rows.get_mut((i + 1) * w + j..(i + 1) * w + j + 2) {
+                d.copy_from_slice(&[scale * a1, scale * b1]);
+            }
+        }
+        if ilast == 1 {
+            let i = R - 1;
+            rows[i * w + j] = scale * c0[i];
+            rows[i * w + j + 1] = scale * c1[i];
+        }
+    }
+    if let [c] = last {
+        let j = at + C - 1;
+        for (i, &v) in c.iter().enumerate() {
+            rows[i * w + j] = scale * v;
+        }
+    }
+}
+
+/// `cols[j][i] = rows[i w + at + j]`: the inverse of [`to_rows`] (without the scale).
+fn from_rows<const R: usize, const C: usize>(
+    rows: &[f64],
+    w: usize,
+    at: usize,
+    cols: &mut [[f64; R]; C],
+) {
+    let (pairs, last) = cols.as_chunks_mut::<2>();
+    for (jp, [c0, c1]) in pairs.iter_mut().enumerate() {
+        let j = at + 2 * jp;
+        let ip = R / 2;
+        for q in 0..ip {
+            let i = 2 * q;
+            let (a0, b0) = (rows[i * w + j], rows[i * w + j + 1]);
+            let (a1, b1) = (rows[(i + 1) * w + j], rows[(i + 1) * w + j + 1]);
+            c0[i] = a0;
+            c0[i + 1] = a1;
+            c1[i] = b0;
+            c1[i + 1] = b1;
+        }
+        if R % 2 == 1 {
+            let i = R - 1;
+            c0[i] = rows[i * w + j];
+            c1[i] = rows[i * w + j + 1];
+        }
+    }
+    if let [c] = last {
+        let j = at + C - 1;
+        for (i, v) in c.iter_mut().enumerate() {
+            *v = rows[i * w + j];
+        }
+    }
 }
 
 /// Every right-hand side by the dense LU of `[M Gᵀ; G 0]`, which decides `Singular`.
@@ -729,6 +912,19 @@ fn saddle_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
             out.dxddot_du.column_mut(a).as_mut_slice(),
             out.dlambda_du.column_mut(a).as_mut_slice(),
         )?;
+    }
+    // The rows `xddot_rows` reads, as the elimination leaves them.
+    let na = s.actuated.len();
+    let w = row_width(N, na);
+    for (i, row) in out.wx[..N * w].chunks_exact_mut(w).enumerate() {
+        row.fill(0.0);
+        for j in 0..N {
+            row[j] = out.dxddot_dx[(i, j)];
+            row[N + j] = out.dxddot_dxdot[(i, j)];
+        }
+        for a in 0..na {
+            row[2 * N + a] = out.dxddot_du[(i, a)];
+        }
     }
     Ok(())
 }

@@ -28,7 +28,8 @@
 
 use nalgebra::SMatrix;
 
-use super::derivatives::{ForwardDynamicsDerivatives, forward_dynamics_derivatives};
+use super::derivatives::{ForwardDynamicsDerivatives, forward_dynamics_derivatives, row_width};
+use super::input::all_finite;
 use super::report::DynamicsReport;
 use crate::data::Data;
 use crate::error::SolverError;
@@ -69,7 +70,10 @@ pub struct Linearization<const N: usize, const M: usize> {
     pub dyddot_dydot: SMatrix<f64, N, N>,
     /// `∂ÿ/∂U` (d × na).
     pub dyddot_du: SMatrix<f64, N, N>,
-    /// The Hager/Higham estimate of the 1-norm condition number of `G_c`.
+    /// The 1-norm condition number of `G_c`: exact (the product of the largest 1-norms of the
+    /// inverse-kinematics blocks and of their inverses) when `G_c` is the block-diagonal `G_y`
+    /// of forward dynamics' elimination (the outputs' coordinates, the derivatives solved by
+    /// it), else the Hager/Higham estimate from its LU.
     pub cond: f64,
     /// The full derivatives of forward dynamics at the state.
     pub derivatives: ForwardDynamicsDerivatives<N, M>,
@@ -183,6 +187,104 @@ pub fn linearize<K: Derivatives<N, M>, const N: usize, const M: usize>(
     out.na = s.actuated.len();
     out.index = [0; N];
     out.index[..d].copy_from_slice(idx);
+    let what = "G_c";
+    let ik = s.ik_blocks;
+    let blocks_cover = ik.iter().map(|b| b.rows.len()).sum::<usize>() == M;
+    match out.derivatives.reduced_parts() {
+        Some((rt, inv, (knorm, kinv_norm)))
+            if coordinates == Coordinates::Outputs && blocks_cover =>
+        {
+            // The elimination's factors: G_c is the block-diagonal G_y (its blocks `K_b`
+            // inverted and their norms known, so its 1-norm condition number is exact) and
+            // the tangent map is its R (`Rᵀ`'s rows, in the outputs' order).
+            out.cond = knorm * kinv_norm;
+            if out.cond.is_nan() || out.cond > model.options.cond_max {
+                return Err(SolverError::Singular {
+                    cond: out.cond,
+                    what,
+                    block: None,
+                });
+            }
+            out.tangent.as_mut_slice().fill(0.0);
+            out.dxdot_dy.as_mut_slice().fill(0.0);
+            let dc_dxdot = &out.derivatives.dc_dxdot.data.0;
+            for (k, (tk, dk)) in out
+                .tangent
+                .data
+                .0
+                .iter_mut()
+                .zip(out.dxdot_dy.data.0.iter_mut())
+                .take(d)
+                .enumerate()
+            {
+                tk.copy_from_slice(&rt[k * N..(k + 1) * N]);
+                // G_c ∂Ẋ_c/∂y_k = -½ ∂c/∂Ẋ T_k, block by block.
+                let mut rhs = [0.0; M];
+                for (col, &t) in dc_dxdot.iter().zip(tk.iter()) {
+                    if t != 0.0 {
+                        for (r, &v) in rhs.iter_mut().zip(col) {
+                            *r -= 0.5 * v * t;
+                        }
+                    }
+                }
+                let mut off = 0;
+                for blk in ik {
+                    let kb = blk.rows.len();
+                    let kinv = &inv[off..off + kb * kb];
+                    off += kb * kb;
+                    for (r, &jr) in blk.cols.iter().enumerate() {
+                        let mut v = 0.0;
+                        for (c, &ic) in blk.rows.iter().enumerate() {
+                            v += kinv[c * kb + r] * rhs[ic];
+                        }
+                        dk[jr] = v;
+                    }
+                }
+            }
+        }
+        _ => tangent_lu(model, data, out, idx)?,
+    }
+    // The rows of y of ∂Ẍ/∂X T + ∂Ẍ/∂Ẋ ∂Ẋ/∂y, ∂Ẍ/∂Ẋ T and ∂Ẍ/∂U, from the derivatives'
+    // rows.
+    let na = out.na;
+    let w = row_width(N, na);
+    let rows = out.derivatives.xddot_rows();
+    out.dyddot_dy.as_mut_slice().fill(0.0);
+    out.dyddot_dydot.as_mut_slice().fill(0.0);
+    out.dyddot_du.as_mut_slice().fill(0.0);
+    for (i, &jy) in idx.iter().enumerate() {
+        let row = &rows[jy * w..(jy + 1) * w];
+        let (rx, rv) = (&row[..N], &row[N..2 * N]);
+        for k in 0..d {
+            let (tk, dk) = (&out.tangent.data.0[k], &out.dxdot_dy.data.0[k]);
+            out.dyddot_dy[(i, k)] = linalg::dot4(rx, tk) + linalg::dot4(rv, dk);
+            out.dyddot_dydot[(i, k)] = linalg::dot4(rv, tk);
+        }
+        for c in 0..na {
+            out.dyddot_du[(i, c)] = row[2 * N + c];
+        }
+    }
+    // The columns in use (the rest stays zero).
+    let all = [
+        &out.tangent.as_slice()[..N * d],
+        &out.dxdot_dy.as_slice()[..N * d],
+        &out.dyddot_dy.as_slice()[..N * d],
+        &out.dyddot_dydot.as_slice()[..N * d],
+    ];
+    if !all.iter().all(|v| all_finite(v)) {
+        return Err(SolverError::NonFinite { what: "linearize" });
+    }
+    Ok(report)
+}
+
+/// The tangent map `T` and `∂Ẋ/∂y` by the LU of `G_c` (the coordinates `idx` independent),
+/// with its condition estimate in `out.cond`.
+fn tangent_lu<K: Derivatives<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &Data<N, M>,
+    out: &mut Linearization<N, M>,
+    idx: &[usize],
+) -> Result<(), SolverError> {
     // The other coordinates, ascending.
     let mut is_y = [false; N];
     for &j in idx {
@@ -221,8 +323,8 @@ pub fn linearize<K: Derivatives<N, M>, const N: usize, const M: usize>(
     }
     // T and ∂Ẋ/∂y, column by column.
     let dc_dxdot = &out.derivatives.dc_dxdot;
-    out.tangent.fill(0.0);
-    out.dxdot_dy.fill(0.0);
+    out.tangent.as_mut_slice().fill(0.0);
+    out.dxdot_dy.as_mut_slice().fill(0.0);
     for (k, &jy) in idx.iter().enumerate() {
         for i in 0..M {
             out.rhs[i] = -g[(i, jy)];
@@ -245,36 +347,5 @@ pub fn linearize<K: Derivatives<N, M>, const N: usize, const M: usize>(
             out.dxdot_dy[(j, k)] = v;
         }
     }
-    // The rows of y of ∂Ẍ/∂X T + ∂Ẍ/∂Ẋ ∂Ẋ/∂y, ∂Ẍ/∂Ẋ T and ∂Ẍ/∂U.
-    let fd = &out.derivatives;
-    out.dyddot_dy.fill(0.0);
-    out.dyddot_dydot.fill(0.0);
-    out.dyddot_du.fill(0.0);
-    for k in 0..d {
-        for (i, &jy) in idx.iter().enumerate() {
-            let (mut a, mut v) = (0.0, 0.0);
-            for j in 0..N {
-                a += fd.dxddot_dx[(jy, j)] * out.tangent[(j, k)]
-                    + fd.dxddot_dxdot[(jy, j)] * out.dxdot_dy[(j, k)];
-                v += fd.dxddot_dxdot[(jy, j)] * out.tangent[(j, k)];
-            }
-            out.dyddot_dy[(i, k)] = a;
-            out.dyddot_dydot[(i, k)] = v;
-        }
-    }
-    for c in 0..out.na {
-        for (i, &jy) in idx.iter().enumerate() {
-            out.dyddot_du[(i, c)] = fd.dxddot_du[(jy, c)];
-        }
-    }
-    let all = [
-        out.tangent.as_slice(),
-        out.dxdot_dy.as_slice(),
-        out.dyddot_dy.as_slice(),
-        out.dyddot_dydot.as_slice(),
-    ];
-    if all.iter().any(|v| v.iter().any(|x| !x.is_finite())) {
-        return Err(SolverError::NonFinite { what: "linearize" });
-    }
-    Ok(report)
+    Ok(())
 }

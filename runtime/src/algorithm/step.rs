@@ -14,10 +14,17 @@
 //! `D s_i = [I 0] + c_i h D k_{i-1}` and `D k_i = J(s_i) D s_i + [0 B(s_i)]`, where
 //! `J = [0 I; ∂Ẍ/∂X ∂Ẍ/∂Ẋ]` and `B = [0; ∂Ẍ/∂U]` come from
 //! [`forward_dynamics_derivatives_with`] at each stage (four for RK4, one for Euler).
+//!
+//! The RK4 products run over rows (all `2N + na` directions of a row at once, the solve's own
+//! layout) and use the elimination's split `[∂Ẍ/∂X ∂Ẍ/∂Ẋ] = X0 + R Z`: `Z D k` on the `P`
+//! outputs' rows, then `X0`'s rows (non-zero only on the blocks' coordinates, and sparse there)
+//! and `R` times it, rather than the dense `N × 2N` product (the dense product after the
+//! dense LU).
 
 use super::baumgarte::Baumgarte;
 use super::derivatives::{
-    DerivativesSolver, ForwardDynamicsDerivatives, forward_dynamics_derivatives_with,
+    DerivativesSolver, ForwardDynamicsDerivatives, P_MAX, Terms, forward_dynamics_derivatives_with,
+    row_width,
 };
 use super::forward_dynamics::forward_dynamics;
 use super::report::DynamicsReport;
@@ -42,8 +49,11 @@ pub struct StepDerivatives<const N: usize, const M: usize> {
     pub jacobian: Vec<f64>,
     /// Forward dynamics' derivatives at the last stage evaluated.
     pub derivatives: ForwardDynamicsDerivatives<N, M>,
-    ds: Vec<f64>,
-    dk: Vec<f64>,
+    /// The stages' `D Ẍ_i = ∂Ẍ(s_i)/∂(s, U)` as rows (see `rk4_step_derivatives`): four blocks
+    /// of N rows of the derivatives' row width.
+    kv: Vec<f64>,
+    /// `c h Z D k_{i-1}` (the outputs' rows of the low-rank part, see `rk4_step_derivatives`).
+    tz: Vec<f64>,
 }
 
 impl<const N: usize, const M: usize> StepDerivatives<N, M> {
@@ -56,8 +66,8 @@ impl<const N: usize, const M: usize> StepDerivatives<N, M> {
             na: 0,
             jacobian: vec![0.0; len],
             derivatives: ForwardDynamicsDerivatives::new(),
-            ds: vec![0.0; len],
-            dk: vec![0.0; len],
+            kv: vec![0.0; 4 * N * row_width(N, N)],
+            tz: vec![0.0; P_MAX * row_width(N, N)],
         }
     }
 
@@ -98,40 +108,6 @@ pub fn semi_implicit_euler_step<K: Derivatives<N, M>, const N: usize, const M: u
         data.x[j] += dt * data.xdot[j];
     }
     Ok(report)
-}
-
-/// `dk = J(s_i) ds + [0 B(s_i)]` from the derivatives at the stage, over `cols` columns.
-fn stage_product<const N: usize, const M: usize>(
-    fd: &ForwardDynamicsDerivatives<N, M>,
-    ds: &[f64],
-    dk: &mut [f64],
-    na: usize,
-) {
-    let n2 = 2 * N;
-    let cols = n2 + na;
-    for c in 0..cols {
-        let (src, dst) = (&ds[c * n2..(c + 1) * n2], &mut dk[c * n2..(c + 1) * n2]);
-        let (top, bottom) = dst.split_at_mut(N);
-        top.copy_from_slice(&src[N..]);
-        bottom.fill(0.0);
-        for (k, (&a, &v)) in src[..N].iter().zip(&src[N..]).enumerate() {
-            if a != 0.0 {
-                for (b, &m) in bottom.iter_mut().zip(fd.dxddot_dx.data.0[k].iter()) {
-                    *b += a * m;
-                }
-            }
-            if v != 0.0 {
-                for (b, &m) in bottom.iter_mut().zip(fd.dxddot_dxdot.data.0[k].iter()) {
-                    *b += v * m;
-                }
-            }
-        }
-        if c >= n2 {
-            for (b, &m) in bottom.iter_mut().zip(fd.dxddot_du.data.0[c - n2].iter()) {
-                *b += m;
-            }
-        }
-    }
 }
 
 /// Forward dynamics' derivatives at `(x, xdot)` into `out.derivatives`, `Ẍ` into `acc`.
@@ -180,52 +156,128 @@ pub fn rk4_step_derivatives<K: Derivatives<N, M>, const N: usize, const M: usize
     let na = model.structure().actuated.len();
     let n2 = 2 * N;
     let cols = n2 + na;
-    let len = n2 * cols;
+    let w = row_width(N, na);
     out.na = na;
     let (x0, v0) = (data.x, data.xdot);
     let mut acc = [0.0; N];
     let (mut xs, mut vs) = (x0, v0);
-    // The update s' = s + h/6 Σ b_i k_i, and its derivative E + h/6 Σ b_i D k_i.
     let (mut x1, mut v1) = (x0, v0);
-    out.jacobian[..len].fill(0.0);
     let stages = [(0.0, 1.0), (0.5, 2.0), (0.5, 2.0), (1.0, 1.0)];
+    let mut t = Terms::new();
     for (i, &(c, b)) in stages.iter().enumerate() {
-        // s_i = s + c h k_{i-1} (k_{i-1} = (vs, acc) of the previous stage), D s_i likewise.
+        // s_i = s + c h k_{i-1} (k_{i-1} = (vs, acc) of the previous stage).
         if i > 0 {
             let (kx, kv) = (vs, acc);
             for j in 0..N {
                 xs[j] = x0[j] + c * dt * kx[j];
                 vs[j] = v0[j] + c * dt * kv[j];
             }
-            for (d, &k) in out.ds[..len].iter_mut().zip(&out.dk[..len]) {
-                *d = c * dt * k;
-            }
-        } else {
-            out.ds[..len].fill(0.0);
-        }
-        for j in 0..n2 {
-            out.ds[j * n2 + j] += 1.0;
         }
         stage(model, data, out, u, baumgarte, &xs, &vs, &mut acc)?;
-        let (ds, dk) = (&out.ds[..len], &mut out.dk[..len]);
-        stage_product(&out.derivatives, ds, dk, na);
-        for (f, &k) in out.jacobian[..len].iter_mut().zip(dk.iter()) {
-            *f += b * k;
+        // D Ẍ_i = wx_i + c h (J_x,i D Ẋ_{i-1} + J_v,i D Ẍ_{i-1}) with
+        // D Ẋ_{i-1} = E_v + c_{i-1} h D Ẍ_{i-2} (module documentation; wx_i the rows of
+        // [∂Ẍ/∂X ∂Ẍ/∂Ẋ ∂Ẍ/∂U] at the stage, E_v the unit rows of Ẋ).
+        let wx = &out.derivatives.xddot_rows()[..N * w];
+        let (prev, rest) = out.kv.split_at_mut(i * N * w);
+        let cur = &mut rest[..N * w];
+        cur.copy_from_slice(wx);
+        if i > 0 {
+            let jd = JdProduct {
+                ch: c * dt,
+                cph: if i > 1 { stages[i - 1].0 * dt } else { 0.0 },
+                i,
+                w,
+            };
+            let p = model.structure().outputs.len();
+            match (
+                out.derivatives.low_rank_rows(),
+                out.derivatives.reduced_parts(),
+            ) {
+                (Some((x0, z)), Some((rt, _, _))) if p <= P_MAX => {
+                    // J_i = X0 + R Z (X0 zero off the blocks' rows): Z D k_{i-1} first
+                    // (P rows), then X0's rows and R times it.
+                    let tz = &mut out.tz[..p * w];
+                    for (trow, zrow) in tz.chunks_exact_mut(w).zip(z.chunks_exact(w)) {
+                        trow.fill(0.0);
+                        jd.add::<N>(&mut t, zrow, trow, prev);
+                    }
+                    for (r, row) in cur.chunks_exact_mut(w).enumerate() {
+                        if model.ik_block_of[r] < model.structure().ik_blocks.len() {
+                            jd.add::<N>(&mut t, &x0[r * w..(r + 1) * w], row, prev);
+                        }
+                        for c in 0..p {
+                            t.push(rt[c * N + r], c, row, tz, w);
+                        }
+                        t.flush(row, tz, w);
+                    }
+                }
+                _ => {
+                    for (row, src) in cur.chunks_exact_mut(w).zip(wx.chunks_exact(w)) {
+                        jd.add::<N>(&mut t, src, row, prev);
+                    }
+                }
+            }
         }
         for j in 0..N {
             x1[j] += dt / 6.0 * b * vs[j];
             v1[j] += dt / 6.0 * b * acc[j];
         }
     }
-    for f in out.jacobian[..len].iter_mut() {
-        *f *= dt / 6.0;
-    }
-    for j in 0..n2 {
-        out.jacobian[j * n2 + j] += 1.0;
+    // F = I + h/6 Σ b_i D k_i, D k_i = (D Ẋ_i, D Ẍ_i): the rows of X gather
+    // h Σ b_i c_i D Ẍ_{i-1} = h (D Ẍ_1 + D Ẍ_2 + D Ẍ_3) beside 6 E_v, those of Ẋ
+    // D Ẍ_1 + 2 D Ẍ_2 + 2 D Ẍ_3 + D Ẍ_4.
+    let kv = &out.kv[..4 * N * w];
+    let (k1, rest) = kv.split_at(N * w);
+    let (k2, rest) = rest.split_at(N * w);
+    let (k3, k4) = rest.split_at(N * w);
+    let (hx, hv) = (dt * dt / 6.0, dt / 6.0);
+    let jac = &mut out.jacobian[..n2 * cols];
+    for (col, c) in jac.chunks_exact_mut(n2).zip(0..cols) {
+        let (top, bottom) = col.split_at_mut(N);
+        for k in 0..N {
+            let e = k * w + c;
+            top[k] = hx * (k1[e] + k2[e] + k3[e]);
+            bottom[k] = hv * (k1[e] + 2.0 * (k2[e] + k3[e]) + k4[e]);
+        }
+        if c < N {
+            top[c] += 1.0;
+        } else if c < n2 {
+            top[c - N] += dt;
+            bottom[c - N] += 1.0;
+        }
     }
     out.x = x1;
     out.xdot = v1;
-    finite(&out.jacobian[..len])
+    finite(&out.jacobian[..n2 * cols])
+}
+
+/// `row += c h (J D k_{i-1})` for a row `J` of `[∂Ẍ/∂X ∂Ẍ/∂Ẋ]` (the first 2N entries of
+/// `src`), with `D k_{i-1} = (D Ẋ_{i-1}, D Ẍ_{i-1})`, `D Ẋ_{i-1} = E_v + c_{i-1} h D Ẍ_{i-2}`
+/// and the earlier stages' `D Ẍ` in `prev` (N rows each).
+struct JdProduct {
+    /// `c_i h`.
+    ch: f64,
+    /// `c_{i-1} h` (zero at the second stage: `D Ẋ_1 = E_v`).
+    cph: f64,
+    i: usize,
+    w: usize,
+}
+
+impl JdProduct {
+    #[inline(always)]
+    fn add<const N: usize>(&self, t: &mut Terms, src: &[f64], row: &mut [f64], prev: &[f64]) {
+        let (ch, i, w) = (self.ch, self.i, self.w);
+        for k in 0..N {
+            row[N + k] += ch * src[k];
+        }
+        for k in 0..N {
+            if self.cph != 0.0 {
+                t.push(ch * self.cph * src[k], (i - 2) * N + k, row, prev, w);
+            }
+            t.push(ch * src[N + k], (i - 1) * N + k, row, prev, w);
+        }
+        t.flush(row, prev, w);
+    }
 }
 
 /// One semi-implicit Euler step ([`semi_implicit_euler_step`]) and its Jacobians `F_x`, `F_u`
