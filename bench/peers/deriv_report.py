@@ -175,10 +175,20 @@ def main():
              "dynamics and its derivatives: q̈ and λ w.r.t. q, v, τ) over rbss's "
              "`forward_dynamics_derivatives` (Ẍ and λ w.r.t. X, Ẋ, U, forward dynamics included); "
              "MuJoCo's `mjd_transitionFD` (A 48 × 48, B 48 × 6 of one `mj_step`, by finite differences, "
-             "eps 1e-6) over rbss's step Jacobians with the same integrator and step (RK4 with RK4, "
-             "MuJoCo's semi-implicit Euler with rbss's). The generated C's native row over the native "
+             "eps 1e-6; for RK4, which it refuses, the same differences of `mj_step` by hand) over rbss's "
+             "step Jacobians with the same integrator and step (RK4 with RK4, MuJoCo's semi-implicit "
+             "Euler with rbss's). The generated C's native row over the native "
              "rbss" + (" (RBSS_DERIV_NATIVE)." if nbin else ": no native rbss in this run, so over the "
                        "portable one.") + "\n")
+    if float(loads[q]["start"]["load"][0]) > 2 * (os.cpu_count() or 1):
+        L.append(f"**Caution: a loaded machine** (load {loads[q]['start']['load'][0]} on {os.cpu_count()} "
+                 f"CPUs). Every timing is wall-clock per call, the median over batches: rbss's batches "
+                 f"last ~1 ms, the C++ harness's 10 to 100 ms (a fixed number of calls), so under load "
+                 f"the peers' batches are preempted far more often than rbss's and their times inflate "
+                 f"more (compare Pinocchio's `constraintDynamics` here with its quiet-machine time in the "
+                 f"forward-dynamics table above): the ratios below overstate rbss's lead by an unknown "
+                 f"factor. Re-run on a quiet machine before quoting them; the agreement numbers do not "
+                 f"depend on the load.\n")
     L.append("| rbss | portable | " + ("native |" if nbin else "") )
     L.append("|---|---:|" + ("---:|" if nbin else ""))
     for key, label in rbss_rows:
