@@ -1,16 +1,24 @@
 // bench/peers/codegen_gen.cpp -- Pinocchio's generated code for the paper's 6-UPS: records
 // pinocchio::constraintDynamics (the model of stewart_pin.hpp: a tree of six RX-RY-PZ legs and a
 // free-flyer platform, six CONTACT_3D loop closures, default ProximalSettings) on CppAD<CG<double>>
-// with Pinocchio's CodeGenConstraintDynamics, and writes CppADCodeGen's straight-line C sources.
-// Driven by run.sh (PEERS_CODEGEN=1); see README.md.
+// with Pinocchio's CodeGenConstraintDynamics, and writes CppADCodeGen's straight-line C sources;
+// with the second argument `derivatives`, the same for its derivatives
+// (CodeGenConstraintDynamicsDerivatives: constraintDynamics then
+// computeConstraintDynamicsDerivatives on the tape). Driven by run.sh (PEERS_CODEGEN=1) and
+// run_derivatives.sh; see README.md.
 //
-// usage: codegen_gen OUT_DIR   (prints "key value" lines: tape size, CppAD/CppADCodeGen versions)
+// usage: codegen_gen OUT_DIR [derivatives]
+//   (prints "key value" lines: tape size, CppAD/CppADCodeGen versions)
 //   OUT_DIR/constraintDynamics_forward_zero.c: the function
 //     void constraintDynamics_forward_zero(double const *const *in, double *const *out,
 //                                          struct LangCAtomicFun atomicFun)
 //   in[0] = [q (25), v (24), tau (24)], out[0] = [ddq (24), lambda_c (18)] (Pinocchio's
 //   coordinates and multipliers, as pinocchio::constraintDynamics returns them); the other files
 //   are CppADCodeGen's library glue (info, sparsity, atomic-function table), not used here.
+//   With `derivatives`: OUT_DIR/constraintDynamicsDerivatives_forward_zero.c, same signature,
+//   in[0] as above, out[0] = [ddq_dq, ddq_dv, ddq_dtau (24 x 24 each, row-major),
+//   dlambda_dq, dlambda_dv, dlambda_dtau (18 x 24 each, column-major)], the layout of
+//   CodeGenConstraintDynamicsDerivatives::buildMap.
 //
 // CppADCodeGen 2.4.3's ModelLibraryCSourceGen::saveSources does not compile (it calls
 // ModelCSourceGen::getSources() without the two arguments that takes);
@@ -26,15 +34,16 @@
 #include <cstdio>
 #include <string>
 
-struct Gen : pin::CodeGenConstraintDynamics<double> {
-  typedef pin::CodeGenConstraintDynamics<double> Base;
-  Gen(const pin::Model& m, const std::vector<pin::RigidConstraintModel>& c)
-      : Base(m, c, "constraintDynamics", "cg_constraintDynamics") {}
+template <class Base>
+struct Gen : Base {
+  Gen(const pin::Model& m, const std::vector<pin::RigidConstraintModel>& c, const std::string& name)
+      : Base(m, c, name, "cg_" + name), name(name) {}
+  std::string name;
 
-  // Record the tape (CodeGenConstraintDynamics::buildMap) and write the C sources.
+  // Record the tape (the CodeGen class's buildMap) and write the C sources.
   void save(const std::string& dir) {
-    buildMap();
-    CppAD::cg::ModelCSourceGen<double> cgen(this->ad_fun, "constraintDynamics");
+    this->buildMap();
+    CppAD::cg::ModelCSourceGen<double> cgen(this->ad_fun, name);
     cgen.setCreateForwardZero(true);
     cgen.setCreateJacobian(false);
     cgen.setCreateSparseJacobian(false);
@@ -58,8 +67,9 @@ struct Gen : pin::CodeGenConstraintDynamics<double> {
 };
 
 int main(int argc, char** argv) {
-  if (argc != 2) {
-    std::fprintf(stderr, "usage: %s OUT_DIR\n", argv[0]);
+  bool derivatives = argc == 3 && std::string(argv[2]) == "derivatives";
+  if (argc != 2 && !derivatives) {
+    std::fprintf(stderr, "usage: %s OUT_DIR [derivatives]\n", argv[0]);
     return 2;
   }
   PinRobot pr = build_pin();
@@ -68,7 +78,13 @@ int main(int argc, char** argv) {
                  (int)pr.model.nq, (int)pr.model.nv, pr.cmodels.size());
     return 1;
   }
-  Gen g(pr.model, pr.cmodels);
-  g.save(argv[1]);
+  if (derivatives) {
+    Gen<pin::CodeGenConstraintDynamicsDerivatives<double>> g(pr.model, pr.cmodels,
+                                                             "constraintDynamicsDerivatives");
+    g.save(argv[1]);
+  } else {
+    Gen<pin::CodeGenConstraintDynamics<double>> g(pr.model, pr.cmodels, "constraintDynamics");
+    g.save(argv[1]);
+  }
   return 0;
 }

@@ -429,8 +429,16 @@ def report(build, outdir):
              f"timing runs {' '.join(win['start'][1])}, after them {' '.join(win['end'][1])} |")
     L.append(f"| masses [kg] | lower link, upper link, platform: {r['masses']} (paper-example.md: 30.630528372500, 31.365661053441, 74.160674941682) |")
     L.append("")
-    with open(os.path.join(outdir, "RESULT.md"), "w") as f:
-        f.write("\n".join(L) + "\n")
+    # keep the derivatives' section (deriv_report.py, run_derivatives.sh) of the previous file
+    path = os.path.join(outdir, "RESULT.md")
+    keep = ""
+    if os.path.exists(path):
+        old = open(path).read()
+        a, b = old.find("<!-- derivatives:"), old.find("<!-- /derivatives -->")
+        if a >= 0 and b > a:
+            keep = "\n" + old[a:b + len("<!-- /derivatives -->")] + "\n"
+    with open(path, "w") as f:
+        f.write("\n".join(L) + "\n" + keep)
     print("\n".join(L[4:4 + len(calls) + 3]))
 
 
@@ -583,7 +591,8 @@ def git_head():
         return "unknown"
     # the script's own outputs do not make the tree "changed"
     d = subprocess.run(["git", "-C", ROOT, "status", "--porcelain", "--untracked-files=no", "--", ".",
-                        ":!bench/peers/RESULT.md", ":!bench/peers/peers.csv"], capture_output=True, text=True)
+                        ":!bench/peers/RESULT.md", ":!bench/peers/peers.csv",
+                        ":!bench/peers/derivatives.csv"], capture_output=True, text=True)
     return r.stdout.strip() + (" with uncommitted changes" if d.stdout.strip() else "")
 
 

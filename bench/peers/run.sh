@@ -37,35 +37,14 @@ source "$HERE/venv.sh"
 want="pin==$PIN_VERSION mujoco-core==$MUJOCO_VERSION cmeel-eigen==$EIGEN_VERSION"
 [[ $PEERS_CODEGEN == 1 ]] && want+=" cmeel-cppad==$CPPAD_VERSION cmeel-cppadcodegen==$CPPADCG_VERSION"
 peers_venv $want
-SITE=$("$VENV/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')
-CMEEL=$SITE/cmeel.prefix
-MJ=$SITE/mujoco
-MJLIB=$(ls "$MJ"/libmujoco.so.* 2>/dev/null | head -n1 || true)
-[[ -f $CMEEL/include/pinocchio/algorithm/constrained-dynamics.hpp ]] || die "Pinocchio headers missing in $CMEEL"
-[[ -f $CMEEL/lib/libpinocchio_default.so ]] || die "libpinocchio_default.so missing in $CMEEL/lib"
-[[ -f $CMEEL/include/eigen3/Eigen/Dense ]] || die "Eigen headers missing in $CMEEL/include/eigen3"
-[[ -n $MJLIB && -f $MJ/include/mujoco/mujoco.h ]] ||
-  die "libmujoco.so.* or mujoco/mujoco.h missing in $MJ (does the mujoco-core wheel still ship them?)"
-if [[ $PEERS_CODEGEN == 1 ]]; then
-  [[ -f $CMEEL/include/cppad/cg.hpp && -f $CMEEL/include/pinocchio/codegen/cppadcg-algo.hpp ]] ||
-    die "CppADCodeGen or Pinocchio's codegen headers missing in $CMEEL/include (PEERS_CODEGEN=0 skips this peer)"
-  [[ -f $CMEEL/lib/libcppad_lib.so ]] || die "libcppad_lib.so missing in $CMEEL/lib (cmeel-cppad)"
-fi
-
+peers_flags   # CMEEL, MJ, MJLIB, CXXFLAGS, LDFLAGS (venv.sh)
 # ---- 2. the harness (rebuilt when the source or the flags change) ------------------------------
 mkdir -p "$BUILD"
-CXXFLAGS=(-std=c++17 -O3 -DNDEBUG -Wno-deprecated-declarations
-  -DPINOCCHIO_ENABLE_TEMPLATE_INSTANTIATION -DBOOST_MPL_LIMIT_LIST_SIZE=30
-  -DBOOST_MPL_LIMIT_VECTOR_SIZE=30 -DBOOST_MPL_CFG_NO_PREPROCESSED_HEADERS
-  -DBOOST_FUSION_INVOKE_MAX_ARITY=12
-  -I"$CMEEL/include" -I"$CMEEL/include/eigen3" -I"$MJ/include")
-LDFLAGS=(-L"$CMEEL/lib" -lpinocchio_default "$MJLIB" -Wl,-rpath,"$CMEEL/lib" -Wl,-rpath,"$MJ")
-command -v g++ >/dev/null || die "g++ not found"
 # compiles run under `nice` (the timing runs do not)
-stamp="$(g++ --version | head -n1) ${CXXFLAGS[*]} ${LDFLAGS[*]} $(cat "$HERE/harness.cpp" "$HERE/stewart_pin.hpp" | sha256sum | cut -d' ' -f1)"
+stamp="$(g++ --version | head -n1) ${CXXFLAGS[*]} ${LDFLAGS[*]} $(cat "$HERE/harness.cpp" "$HERE/stewart_pin.hpp" "$HERE/stewart_mj.hpp" | sha256sum | cut -d' ' -f1)"
 if [[ ! -x $BUILD/harness || ! -f $BUILD/harness.stamp || $(cat "$BUILD/harness.stamp") != "$stamp" ]]; then
   step "g++ harness.cpp (Pinocchio is header-heavy: 1 to 2 minutes)"
-  nice -n 10 g++ "${CXXFLAGS[@]}" "$HERE/harness.cpp" -o "$BUILD/harness" "${LDFLAGS[@]}" ||
+  nice -n "$PEERS_NICE" g++ "${CXXFLAGS[@]}" "$HERE/harness.cpp" -o "$BUILD/harness" "${LDFLAGS[@]}" ||
     die "compiling harness.cpp failed"
   echo "$stamp" >"$BUILD/harness.stamp"
 fi
@@ -74,19 +53,9 @@ fi
 CG=$BUILD/codegen
 rm -f "$CG/results.txt"   # never report a previous run's generated peer
 if [[ $PEERS_CODEGEN == 1 ]]; then
-  command -v gcc >/dev/null || die "gcc not found"
   mkdir -p "$CG"
   CG_SRC=$CG/src/constraintDynamics_forward_zero.c
-  # the generator: CppAD<CG<double>> instantiations of Pinocchio; -O1 is enough (it runs in 0.1 s)
-  GENFLAGS=("${CXXFLAGS[@]/-O3/-O1}")
-  stamp="$(g++ --version | head -n1) ${GENFLAGS[*]} pin $PIN_VERSION cppad $CPPAD_VERSION cppadcg $CPPADCG_VERSION $(cat "$HERE/codegen_gen.cpp" "$HERE/stewart_pin.hpp" | sha256sum | cut -d' ' -f1)"
-  if [[ ! -x $CG/codegen_gen || ! -f $CG/codegen_gen.stamp || $(cat "$CG/codegen_gen.stamp") != "$stamp" ]]; then
-    step "g++ codegen_gen.cpp (Pinocchio on CppAD<CG<double>>: 2 to 4 minutes)"
-    nice -n 10 g++ "${GENFLAGS[@]}" "$HERE/codegen_gen.cpp" -o "$CG/codegen_gen" \
-      -L"$CMEEL/lib" -lpinocchio_default -lcppad_lib -ldl -Wl,-rpath,"$CMEEL/lib" ||
-      die "compiling codegen_gen.cpp failed (PEERS_CODEGEN=0 skips this peer)"
-    echo "$stamp" >"$CG/codegen_gen.stamp"
-  fi
+  peers_codegen_gen || die "compiling codegen_gen.cpp failed (PEERS_CODEGEN=0 skips this peer): $(tail -n 5 "$CG/codegen_gen.log")"
   step "codegen_gen: Pinocchio's CodeGenConstraintDynamics -> $CG/src"
   rm -rf "$CG/src" && mkdir -p "$CG/src"
   "$CG/codegen_gen" "$CG/src" >"$CG/gen_info.txt" || die "codegen_gen failed"
@@ -101,7 +70,7 @@ if [[ $PEERS_CODEGEN == 1 ]]; then
     stamp="$(gcc --version | head -n1) ${flags[*]} ($NATIVE_MARCH) $(sha256sum "$CG_SRC" | cut -d' ' -f1)"
     if [[ ! -f $CG/cd_$build.o || ! -f $CG/cd_$build.stamp || $(cat "$CG/cd_$build.stamp") != "$stamp" ]]; then
       step "gcc ${flags[*]} constraintDynamics_forward_zero.c ($build)"
-      nice -n 10 gcc "${flags[@]}" -DconstraintDynamics_forward_zero=cg_cd_$build -c "$CG_SRC" \
+      nice -n "$PEERS_NICE" gcc "${flags[@]}" -DconstraintDynamics_forward_zero=cg_cd_$build -c "$CG_SRC" \
         -o "$CG/cd_$build.o" || die "compiling the generated C ($build) failed"
       echo "$stamp" >"$CG/cd_$build.stamp"
     fi
@@ -113,7 +82,7 @@ if [[ $PEERS_CODEGEN == 1 ]]; then
   stamp="$(g++ --version | head -n1) ${CXXFLAGS[*]} $(cat "$HERE/codegen_harness.cpp" "$HERE/stewart_pin.hpp" | sha256sum | cut -d' ' -f1)"
   if [[ ! -f $CG/codegen_harness.o || ! -f $CG/codegen_harness.stamp || $(cat "$CG/codegen_harness.stamp") != "$stamp" ]]; then
     step "g++ codegen_harness.cpp (about 40 s)"
-    nice -n 10 g++ "${CXXFLAGS[@]}" -c "$HERE/codegen_harness.cpp" -o "$CG/codegen_harness.o" ||
+    nice -n "$PEERS_NICE" g++ "${CXXFLAGS[@]}" -c "$HERE/codegen_harness.cpp" -o "$CG/codegen_harness.o" ||
       die "compiling codegen_harness.cpp failed"
     echo "$stamp" >"$CG/codegen_harness.stamp"
   fi
