@@ -1227,6 +1227,17 @@ fn build_in(
          [profile.release.package.\"*\"]\n\
          codegen-units = 4\n\
          \n\
+         # The rbss crates are members of the rbss workspace, so its `\"*\"` (4 units) does not\n\
+         # apply to them there: the same here, so cargo reuses what the command's build compiled.\n\
+         [profile.release.package.rbss]\n\
+         codegen-units = 16\n\
+         [profile.release.package.rbss-runtime]\n\
+         codegen-units = 16\n\
+         [profile.release.package.rbss-ffi]\n\
+         codegen-units = 16\n\
+         [profile.release.package.rbss-expr]\n\
+         codegen-units = 16\n\
+         \n\
          # The library itself without line tables: 0.5 s less of its 6 to 7 s of compile\n\
          # (6-UPS; BENCHMARKS.md, issue 22); its panics are caught at the C boundary anyway.\n\
          [profile.release.package.rbss-robot-{name}]\n\
