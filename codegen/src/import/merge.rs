@@ -62,28 +62,28 @@ impl SourceMap {
             .items
             .into_iter()
             .map(|mut item| {
-                if item.elsewhere.is_none() {
-                    if let Some((text, place)) = self.imported(item.pos.line) {
-                        let note = format!("imported as `{}`", short(text));
-                        match place {
-                            Some(p) => {
-                                item.pos = p.pos;
-                                item.len = p.len;
-                                item.elsewhere = Some(Box::new(Elsewhere {
-                                    path: p.path.clone(),
-                                    line: p.line.clone(),
-                                    note: Some(note),
-                                }));
-                            }
-                            None => {
-                                item.pos = self.key.0;
-                                item.len = self.key.1;
-                                item.label = "in the model imported from this file".into();
-                                item.help = Some(match item.help.take() {
-                                    Some(h) => format!("{note}; {h}"),
-                                    None => note,
-                                });
-                            }
+                if item.elsewhere.is_none()
+                    && let Some((text, place)) = self.imported(item.pos.line)
+                {
+                    let note = format!("imported as `{}`", short(text));
+                    match place {
+                        Some(p) => {
+                            item.pos = p.pos;
+                            item.len = p.len;
+                            item.elsewhere = Some(Box::new(Elsewhere {
+                                path: p.path.clone(),
+                                line: p.line.clone(),
+                                note: Some(note),
+                            }));
+                        }
+                        None => {
+                            item.pos = self.key.0;
+                            item.len = self.key.1;
+                            item.label = "in the model imported from this file".into();
+                            item.help = Some(match item.help.take() {
+                                Some(h) => format!("{note}; {h}"),
+                                None => note,
+                            });
                         }
                     }
                 }
