@@ -40,6 +40,30 @@ pub struct Diagnostic {
     pub label: String,
     /// A `= help: ...` line.
     pub help: Option<String>,
+    /// The file the error is in when it is not the report's: the source a model file imports
+    /// (`pos` and `len` are then in that file).
+    pub elsewhere: Option<Box<Elsewhere>>,
+}
+
+/// A diagnostic's file when it is not the report's (see [`Diagnostic::elsewhere`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Elsewhere {
+    /// The file's path as shown.
+    pub path: String,
+    /// The text of the diagnostic's line, quoted under the short form.
+    pub line: String,
+    /// A `= note: ...` line (what the model made of the place).
+    pub note: Option<String>,
+}
+
+/// A place in a source file: its path as shown, the line and column of the place, how many
+/// characters it spans on that line, and the line's text (to quote it).
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct Place {
+    pub path: String,
+    pub pos: Pos,
+    pub len: usize,
+    pub line: String,
 }
 
 impl Diagnostic {
@@ -51,6 +75,7 @@ impl Diagnostic {
             message: message.into(),
             label: label.into(),
             help: None,
+            elsewhere: None,
         }
     }
 
@@ -77,13 +102,17 @@ const TAB_WIDTH: usize = 4;
 
 impl Diagnostics {
     /// Collects `items`, sorted by position (a stable sort: errors at the same place keep the
-    /// order they were found in) and without exact duplicates.
+    /// order they were found in; the report's file first, then the others' by path) and
+    /// without exact duplicates.
     pub fn new(
         path: impl Into<String>,
         source: impl Into<String>,
         mut items: Vec<Diagnostic>,
     ) -> Self {
-        items.sort_by_key(|d| d.pos);
+        items.sort_by(|a, b| {
+            let file = |d: &Diagnostic| d.elsewhere.as_ref().map(|e| e.path.clone());
+            file(a).cmp(&file(b)).then(a.pos.cmp(&b.pos))
+        });
         items.dedup();
         Diagnostics {
             path: path.into(),
@@ -143,16 +172,22 @@ impl Diagnostics {
     fn render_one(&self, d: &Diagnostic, severity: &str, out: &mut String) {
         let line = d.pos.line.max(1);
         let col = d.pos.col.max(1);
+        let (path, full) = match &d.elsewhere {
+            Some(e) => (
+                e.path.as_str(),
+                e.line.strip_suffix('\r').unwrap_or(&e.line),
+            ),
+            None => (self.path.as_str(), self.line_text(line)),
+        };
         out.push_str(&format!(
             "{}:{}:{}: {severity}: {}\n",
-            self.path,
+            path,
             line,
             col,
             one_line(&d.message)
         ));
         let num = line.to_string();
         let pad = " ".repeat(num.len());
-        let full = self.line_text(line);
         // A long line (a 2 MB line of generated text) is quoted around the column only.
         let (text, skipped, cut) = window(full, col, d.len);
         let col = col - skipped;
@@ -208,6 +243,9 @@ impl Diagnostics {
         }
         out.push_str(&caret_line);
         out.push('\n');
+        if let Some(note) = d.elsewhere.as_ref().and_then(|e| e.note.as_ref()) {
+            out.push_str(&format!("{pad} = note: {}\n", one_line(note)));
+        }
         if let Some(help) = &d.help {
             out.push_str(&format!("{pad} = help: {}\n", one_line(help)));
         }

@@ -160,7 +160,7 @@ fn generate_impl(
         None => vec![opts.freeze; model.parameters.len()],
     };
     let model_error = |errs: Vec<derive::DeriveError>| {
-        Error::Model(Diagnostics {
+        let d = Diagnostics {
             path: model_path.to_string(),
             source: source.to_string(),
             items: errs
@@ -171,8 +171,14 @@ fn generate_impl(
                     message: e.message,
                     label: String::new(),
                     help: None,
+                    elsewhere: None,
                 })
                 .collect(),
+        };
+        // An imported model's errors at the source's elements.
+        Error::Model(match &model.import {
+            Some(i) => i.map.relocate(d, source),
+            None => d,
         })
     };
     let mut d = derive::derive(&model, with_dynamics, &frozen, &mut stage).map_err(model_error)?;

@@ -49,6 +49,8 @@ pub struct Import {
     pub text: String,
     /// The length of the model file's own text at the start of `text`.
     pub model_len: usize,
+    /// Where `text`'s imported lines come from: the source's elements.
+    pub map: crate::import::merge::SourceMap,
 }
 
 /// A named parameter.

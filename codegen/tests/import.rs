@@ -496,6 +496,93 @@ fn keyword_names_are_mapped_and_tendons_and_sensors_skipped() {
     assert_eq!(m.actuated, ["a"]);
 }
 
+/// The model file renames imported joints and bodies (`[rename]`, by the source's names): SDF's
+/// joint `static` becomes `static_joint` instead of `static_`, a URDF joint and link get names
+/// of the user's choice, everything naming them follows (the mimic loop, the child's parent,
+/// the actuated list), the written model's comments and a note keep the source's names, and an
+/// error about a renamed joint is reported at its element in the source.
+#[test]
+fn renames_from_the_model_file() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("arm.urdf"),
+        "<robot name=\"arm\"><link name=\"base\"/>\n\
+         <link name=\"static\"><inertial><mass value=\"1\"/><inertia ixx=\"0.1\" iyy=\"0.1\" izz=\"0.1\"/></inertial></link>\n\
+         <link name=\"fore-arm\"><inertial><mass value=\"1\"/><inertia ixx=\"0.1\" iyy=\"0.1\" izz=\"0.1\"/></inertial></link>\n\
+         <joint name=\"type\" type=\"revolute\"><parent link=\"base\"/><child link=\"static\"/><axis xyz=\"0 0 1\"/></joint>\n\
+         <joint name=\"j2\" type=\"revolute\"><origin xyz=\"0 0 0.3\"/><parent link=\"static\"/><child link=\"fore-arm\"/>\
+         <axis xyz=\"0 1 0\"/><mimic joint=\"type\" multiplier=\"2\"/></joint>\n</robot>\n",
+    )
+    .unwrap();
+    let model_file = dir.path().join("arm.toml");
+    std::fs::write(
+        &model_file,
+        "urdf = \"arm.urdf\"\n[rename]\njoints = { type = \"shoulder\" }\nbodies = { static = \"upper\", fore-arm = \"fore\" }\n",
+    )
+    .unwrap();
+    let model = model_at(&model_file);
+    let coords: Vec<&str> = model.coordinates.iter().map(|c| c.name.as_str()).collect();
+    assert_eq!(coords, ["shoulder", "j2"]);
+    let bodies: Vec<&str> = model.bodies.iter().map(|b| b.name.as_str()).collect();
+    assert_eq!(bodies, ["upper", "fore"]);
+    let actuated: Vec<&str> = model
+        .actuated
+        .iter()
+        .map(|&k| model.coordinates[k].name.as_str())
+        .collect();
+    assert_eq!(actuated, ["shoulder"]);
+    let text = &model.import.as_ref().unwrap().text;
+    assert!(text.contains("b = \"shoulder\""), "{text}");
+    assert!(text.contains("parent = \"upper\""), "{text}");
+    assert!(text.contains("<joint name=\"type\">"), "{text}");
+    assert!(
+        text.contains("joint `type` of ") && text.contains("is `shoulder` here"),
+        "{text}"
+    );
+    derived(&model);
+
+    // An error about a renamed joint (it mimics itself): at its `<mimic>` in the URDF, under
+    // its new name, not at a line of the merged text.
+    let urdf = std::fs::read_to_string(dir.path().join("arm.urdf")).unwrap();
+    std::fs::write(
+        dir.path().join("arm.urdf"),
+        urdf.replace("<mimic joint=\"type\"", "<mimic joint=\"j2\""),
+    )
+    .unwrap();
+    std::fs::write(
+        &model_file,
+        "urdf = \"arm.urdf\"\n[rename]\njoints = { j2 = \"elbow\" }\n",
+    )
+    .unwrap();
+    let shown = model_file.display().to_string();
+    let err = parse_model(&shown, &std::fs::read_to_string(&model_file).unwrap()).unwrap_err();
+    let report = err.render();
+    assert_eq!(err.items.len(), 1, "{report}");
+    assert!(
+        report.contains("arm.urdf:5:") && report.contains("coupling `mimic_elbow`"),
+        "{report}"
+    );
+    assert!(report.contains("<mimic joint=\"j2\""), "{report}");
+
+    // SDF's `static`, the issue's case: renamed instead of mapped to `static_`.
+    std::fs::write(
+        dir.path().join("kw.sdf"),
+        "<sdf version=\"1.7\"><model name=\"kw\"><link name=\"arm\"><inertial><mass>1</mass>\
+         <inertia><ixx>0.1</ixx><iyy>0.1</iyy><izz>0.1</izz></inertia></inertial></link>\
+         <joint name=\"static\" type=\"revolute\"><parent>world</parent><child>arm</child>\
+         <axis><xyz>0 0 1</xyz></axis></joint></model></sdf>",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.path().join("kw.toml"),
+        "sdf = \"kw.sdf\"\nrename.joints = { static = \"static_joint\" }\n",
+    )
+    .unwrap();
+    let model = model_at(&dir.path().join("kw.toml"));
+    assert_eq!(model.coordinates[0].name, "static_joint");
+    assert_eq!(model.actuated, [0]);
+}
+
 /// A floating base from each format: an MJCF `<freejoint>` has the kernels of the same robot
 /// written with a `free` joint in TOML (MuJoCo's qpos: the body's world pose, homes as written);
 /// an SDF root link no joint holds and a URDF `floating` joint import as free joints too, with

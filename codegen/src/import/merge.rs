@@ -18,8 +18,8 @@ use std::path::Path;
 use toml::Spanned;
 use toml::de::{DeArray, DeTable, DeValue};
 
-use super::{Format, Imported, SourceFile, import_file};
-use crate::diagnostics::{Diagnostic, Diagnostics};
+use super::{Format, Imported, Renames, SourceFile, ident, import_renamed};
+use crate::diagnostics::{Diagnostic, Diagnostics, Elsewhere, Place, Pos};
 
 type Value<'a> = Spanned<DeValue<'a>>;
 
@@ -32,6 +32,128 @@ pub struct Resolved {
     pub source: SourceFile,
     /// The source's warnings, as the model file's (at the source key).
     pub warnings: Vec<Diagnostic>,
+    /// Where the merged text's lines come from.
+    pub map: SourceMap,
+}
+
+/// Where the lines of a merged text come from: the model file's own lines are its first ones;
+/// each line of the imported model comes from an element of the source (a `[[body]]`'s
+/// `inertia` from the link's `<inertia>`, a coordinate from its `<joint>`), or, for the lines no
+/// element gave (the header, `coordinates = [`), from the model file's source key.
+#[derive(Debug, Clone, Default)]
+pub struct SourceMap {
+    /// The model file's length in bytes: its text is the merged text's start.
+    pub model_len: usize,
+    /// The merged text's line (1-based) of the imported model's first line.
+    first_line: usize,
+    /// Each imported line: its text (its comment cut) and its place in the source.
+    lines: Vec<(String, Option<Place>)>,
+    /// The model file's source key's value (`"arm.urdf"`): its position and length.
+    key: (Pos, usize),
+}
+
+impl SourceMap {
+    /// `d` (positions in the merged text) with every position in the imported model moved to
+    /// the source's element it comes from (the imported line as a note), "(line N)" in its
+    /// texts the same, and the model file's own text to quote.
+    pub fn relocate(&self, d: Diagnostics, merged: &str) -> Diagnostics {
+        let model = merged.get(..self.model_len).unwrap_or(merged).to_string();
+        let items = d
+            .items
+            .into_iter()
+            .map(|mut item| {
+                if item.elsewhere.is_none()
+                    && let Some((text, place)) = self.imported(item.pos.line)
+                {
+                    let note = format!("imported as `{}`", short(text));
+                    match place {
+                        Some(p) => {
+                            item.pos = p.pos;
+                            item.len = p.len;
+                            item.elsewhere = Some(Box::new(Elsewhere {
+                                path: p.path.clone(),
+                                line: p.line.clone(),
+                                note: Some(note),
+                            }));
+                        }
+                        None => {
+                            item.pos = self.key.0;
+                            item.len = self.key.1;
+                            item.label = "in the model imported from this file".into();
+                            item.help = Some(match item.help.take() {
+                                Some(h) => format!("{note}; {h}"),
+                                None => note,
+                            });
+                        }
+                    }
+                }
+                item.message = self.lines_named(&item.message);
+                item.label = self.lines_named(&item.label);
+                item.help = item.help.map(|h| self.lines_named(&h));
+                item
+            })
+            .collect();
+        Diagnostics::new(d.path, model, items)
+    }
+
+    /// The imported line at `line` of the merged text, if it is one.
+    fn imported(&self, line: usize) -> Option<&(String, Option<Place>)> {
+        line.checked_sub(self.first_line)
+            .and_then(|k| self.lines.get(k))
+    }
+
+    /// `s` with every "line N" of an imported line as "FILE:LINE" of its source ("on line N"
+    /// as "at FILE:LINE").
+    fn lines_named(&self, s: &str) -> String {
+        let mut out = String::new();
+        let mut rest = s;
+        while let Some(i) = rest.find("line ") {
+            let word = i == 0 || rest[..i].ends_with([' ', '(']);
+            let after = &rest[i + 5..];
+            let digits = after.bytes().take_while(u8::is_ascii_digit).count();
+            let place = after[..digits]
+                .parse::<usize>()
+                .ok()
+                .filter(|_| word && !after[digits..].starts_with(|c: char| c.is_alphanumeric()))
+                .and_then(|n| self.imported(n))
+                .and_then(|(_, p)| p.as_ref());
+            match place {
+                Some(p) => {
+                    let head = &rest[..i];
+                    match head.strip_suffix("on ") {
+                        Some(h) => {
+                            out.push_str(h);
+                            out.push_str("at ");
+                        }
+                        None => out.push_str(head),
+                    }
+                    out.push_str(&format!("{}:{}", p.path, p.pos.line));
+                    rest = &after[digits..];
+                }
+                None => {
+                    out.push_str(&rest[..i + 5]);
+                    rest = after;
+                }
+            }
+        }
+        out.push_str(rest);
+        out
+    }
+}
+
+/// An imported line as a note shows it: without its comment, at most 120 characters.
+fn short(line: &str) -> String {
+    let line = match line.find("  # <") {
+        Some(i) => &line[..i],
+        None => line,
+    };
+    let line = line.trim();
+    if line.chars().count() > 120 {
+        let cut: String = line.chars().take(117).collect();
+        format!("{cut}...")
+    } else {
+        line.to_string()
+    }
 }
 
 /// The model file's source key (`urdf`, `mjcf`, `sdf`), if it has one: the format, the path as
@@ -50,6 +172,7 @@ pub fn source_key(root: &DeTable<'_>) -> Option<(Format, String, std::ops::Range
 pub fn resolve(
     model_path: &str,
     source: &str,
+    root: &DeTable<'_>,
     key: (Format, String, std::ops::Range<usize>),
 ) -> Result<Resolved, Diagnostics> {
     let (format, rel, span) = key;
@@ -77,8 +200,52 @@ pub fn resolve(
             "the path is relative to this model file",
         ));
     }
-    let (imported, warnings) = import_file(&path, &shown, format)?;
-    let (text, start) = combined(source, &imported);
+    let (mut renames, spans) = renames_of(model_path, source, root)?;
+    let (imported, warnings) = import_renamed(&path, &shown, format, &mut renames)?;
+    // A rename of a name the source does not have.
+    let mut unknown = Vec::new();
+    for ((kind, list, seen), spans) in [
+        ("joint", &renames.joints, &renames.seen_joints),
+        ("body", &renames.bodies, &renames.seen_bodies),
+    ]
+    .into_iter()
+    .zip(&spans)
+    {
+        for ((from, _), span) in list.iter().zip(spans) {
+            if seen.contains(from) {
+                continue;
+            }
+            let d = model_diag(format!("{shown} has no {kind} `{from}`"), "not renamed")
+                .items
+                .remove(0);
+            let mut d = Diagnostic {
+                pos: crate::source::pos_of(source, span.start),
+                len: source.get(span.clone()).map_or(1, |s| s.chars().count()),
+                ..d
+            };
+            d.help = crate::diagnostics::suggest(from, seen.iter().map(|s| (s.as_str(), None)))
+                .or_else(|| {
+                    (!seen.is_empty()).then(|| {
+                        let names: Vec<&str> = seen.iter().take(12).map(String::as_str).collect();
+                        format!("its {kind} names: {}", names.join(", "))
+                    })
+                });
+            unknown.push(d);
+        }
+    }
+    if !unknown.is_empty() {
+        return Err(Diagnostics::new(model_path, source, unknown));
+    }
+    let (text, start, lines) = combined(source, &imported);
+    let map = SourceMap {
+        model_len: source.len(),
+        first_line: text[..start].matches('\n').count() + 1,
+        lines,
+        key: (
+            crate::source::pos_of(source, span.start),
+            source.get(span.clone()).map_or(1, |s| s.chars().count()),
+        ),
+    };
     let warnings = warnings
         .items
         .iter()
@@ -101,19 +268,124 @@ pub fn resolve(
             sha256: String::new(),
         }),
         warnings,
+        map,
     })
 }
 
-/// The model file, then a separator comment, then the imported model.
-fn combined(source: &str, imported: &Imported) -> (String, usize) {
+/// The model file's `[rename]`: `joints = { SOURCE_NAME = "new_name" }` and `bodies = {...}`
+/// (URDF and SDF links, MJCF bodies), with the span of each key; every mistake in it at once.
+#[allow(clippy::type_complexity)]
+fn renames_of(
+    model_path: &str,
+    source: &str,
+    root: &DeTable<'_>,
+) -> Result<(Renames, [Vec<std::ops::Range<usize>>; 2]), Diagnostics> {
+    let mut renames = Renames::default();
+    let mut spans: [Vec<std::ops::Range<usize>>; 2] = [Vec::new(), Vec::new()];
+    let mut errors = Vec::new();
+    let mut error = |span: std::ops::Range<usize>, msg: String, label: &str| {
+        errors.push(Diagnostic::new(
+            crate::source::pos_of(source, span.start),
+            source
+                .get(span)
+                .map_or(1, |s| s.lines().next().unwrap_or("").chars().count()),
+            msg,
+            label,
+        ));
+    };
+    let Some(r) = root.iter().find(|(k, _)| k.get_ref().as_ref() == RENAME) else {
+        return Ok((renames, spans));
+    };
+    let Some(table) = r.1.get_ref().as_table() else {
+        error(
+            r.1.span(),
+            "`rename` must be a table".into(),
+            "expected `[rename]`",
+        );
+        return Err(Diagnostics::new(model_path, source, errors));
+    };
+    for (k, v) in table.iter() {
+        let which = match k.get_ref().as_ref() {
+            "joints" => 0,
+            "bodies" => 1,
+            other => {
+                error(
+                    k.span(),
+                    format!("unknown key `{other}` in `[rename]`"),
+                    "expected `joints` or `bodies`",
+                );
+                continue;
+            }
+        };
+        let Some(names) = v.get_ref().as_table() else {
+            error(
+                v.span(),
+                format!("`rename.{}` must be a table", k.get_ref()),
+                "expected `{ source_name = \"new_name\" }`",
+            );
+            continue;
+        };
+        for (from, to) in names.iter() {
+            let Some(new) = to.get_ref().as_str() else {
+                error(
+                    to.span(),
+                    "a new name must be a string".into(),
+                    "expected a string",
+                );
+                continue;
+            };
+            if ident(new) != new {
+                error(
+                    to.span(),
+                    format!("`{new}` cannot name a joint or body"),
+                    "not an identifier, or a reserved word",
+                );
+                continue;
+            }
+            let list = if which == 0 {
+                &mut renames.joints
+            } else {
+                &mut renames.bodies
+            };
+            if let Some((first, _)) = list.iter().find(|(_, n)| n == new) {
+                error(
+                    to.span(),
+                    format!(
+                        "`{first}` and `{}` are both renamed `{new}`",
+                        from.get_ref()
+                    ),
+                    "a second name for the same identifier",
+                );
+                continue;
+            }
+            list.push((from.get_ref().to_string(), new.to_string()));
+            spans[which].push(from.span());
+        }
+    }
+    if errors.is_empty() {
+        Ok((renames, spans))
+    } else {
+        Err(Diagnostics::new(model_path, source, errors))
+    }
+}
+
+/// The model file's table of renames of the source's names.
+pub const RENAME: &str = "rename";
+
+/// The model file, then a separator comment, then the imported model; the imported lines
+/// with their places.
+#[allow(clippy::type_complexity)]
+fn combined(source: &str, imported: &Imported) -> (String, usize, Vec<(String, Option<Place>)>) {
     let mut text = source.to_string();
     if !text.ends_with('\n') {
         text.push('\n');
     }
     text.push_str("# ---- imported ----\n");
     let start = text.len();
-    text.push_str(&imported.render_with(true));
-    (text, start)
+    let (rendered, places) = imported.render_mapped();
+    text.push_str(&rendered);
+    let lines = rendered.lines().map(str::to_string).zip(places).collect();
+    (text, start, lines)
 }
 
 /// The document of the merged text: the model file's (`overlay`, the source key removed) merged
@@ -128,7 +400,7 @@ pub fn merged<'a>(
     let mut out = imported;
     for (k, v) in overlay.iter() {
         let key = k.get_ref().as_ref();
-        if Format::from_key(key).is_some() {
+        if Format::from_key(key).is_some() || key == RENAME {
             continue;
         }
         let existing = out

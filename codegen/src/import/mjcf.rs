@@ -24,10 +24,9 @@ use std::path::Path;
 use roxmltree::{Document, Node};
 
 use super::geom::{self, Mat};
-use super::xml::{Cx, child, children, element};
+use super::xml::{Cx, child, children};
 use super::{
-    BodyOut, Coord, Imported, LoopOut, Origin, fnum, ident, joint_steps, number, pose_step, quote,
-    unit,
+    BodyOut, Coord, Imported, LoopOut, fnum, ident, joint_steps, number, pose_step, quote, unit,
 };
 
 /// A body's pose at `qpos0` in the world, and where it is.
@@ -200,6 +199,7 @@ pub(super) fn import<'a, 'i>(
         name: ident(&root.attribute("model").unwrap_or("robot").to_lowercase()),
         description: format!("imported from {}", cx.path),
         gravity: ["0".into(), "0".into(), "-9.81".into()],
+        root: Some(cx.place(root)),
         ..Imported::default()
     };
     for c in kids_named(&ctx, root, "compiler") {
@@ -583,7 +583,7 @@ fn walk<'a, 'i>(
 ) {
     ctx.bodies_seen += 1;
     let name = match b.attribute("name") {
-        Some(n) => ident(n),
+        Some(n) => cx.body_name(n),
         None => format!("body{}", ctx.bodies_seen),
     };
     let class = b.attribute("childclass").or(childclass);
@@ -638,15 +638,27 @@ fn walk<'a, 'i>(
     if transforms.is_empty() {
         transforms.push(quote("Tz(0)"));
     }
+    // The steps' errors at the body's first joint (its pose's at the body), the mass
+    // properties' at `<inertial>`.
+    let mut places = Vec::new();
+    if let Some(j) = kids(ctx, b)
+        .into_iter()
+        .find(|n| matches!(n.tag_name().name(), "joint" | "freejoint"))
+    {
+        places.push(("transforms", cx.place(j)));
+    }
+    if let Some(i) = child(b, "inertial") {
+        for key in ["mass", "com", "inertia"] {
+            places.push((key, cx.place(i)));
+        }
+    }
     out.bodies.push(BodyOut {
         name: name.clone(),
         parent: parent.to_string(),
         transforms,
         mass,
-        origin: Origin {
-            element: element(b),
-            at: cx.at(b),
-        },
+        origin: cx.origin(b),
+        places,
     });
     for c in kids_named(ctx, b, "body") {
         walk(cx, c, &name, here, class, ctx, out);
@@ -672,13 +684,10 @@ fn joint<'a, 'i>(
             .unwrap_or("hinge")
     };
     let name = match j.attribute("name") {
-        Some(n) => ident(n),
+        Some(n) => cx.joint_name(n),
         None => format!("{body}_joint{}", out.coordinates.len() + 1),
     };
-    let origin = Origin {
-        element: element(j),
-        at: cx.at(j),
-    };
+    let origin = cx.origin(j);
     let num = |cx: &mut Cx<'_>, ctx: &Ctx<'a, 'i>, key: &str| -> Option<(String, f64)> {
         let n = lookup(cx, ctx, j, class, key)?;
         cx.number(n, key)
@@ -1092,10 +1101,7 @@ fn equality(cx: &mut Cx<'_>, q: Node<'_, '_>, ctx: &Ctx<'_, '_>, out: &mut Impor
     let name = q
         .attribute("name")
         .map_or_else(|| format!("{tag}{}", out.loops.len() + 1), ident);
-    let origin = Origin {
-        element: element(q),
-        at: cx.at(q),
-    };
+    let origin = cx.origin(q);
     let body_of = |cx: &mut Cx<'_>, key: &str, required: bool| -> Option<String> {
         match q.attribute(key) {
             None if required => {
@@ -1104,7 +1110,7 @@ fn equality(cx: &mut Cx<'_>, q: Node<'_, '_>, ctx: &Ctx<'_, '_>, out: &mut Impor
             }
             None => Some("world".to_string()),
             Some("world") => Some("world".to_string()),
-            Some(b) if ctx.placed.contains_key(&ident(b)) => Some(ident(b)),
+            Some(b) if ctx.placed.contains_key(&cx.body_name(b)) => Some(cx.body_name(b)),
             Some(b) => {
                 cx.error(
                     &cx.attr_range(q, key),

@@ -13,7 +13,7 @@
 
 use std::path::Path;
 
-use crate::diagnostics::{Diagnostic, Diagnostics};
+use crate::diagnostics::{Diagnostic, Diagnostics, Place};
 use crate::model::Pos;
 pub use crate::model::SourceFile;
 
@@ -70,6 +70,8 @@ pub struct Origin {
     pub element: String,
     /// The file (as shown) and line.
     pub at: String,
+    /// The element's tag in its file: where an error of the imported entry is reported.
+    pub place: Option<Place>,
 }
 
 /// One coordinate: a joint's variable.
@@ -98,6 +100,9 @@ pub struct BodyOut {
     /// `mass`, `com`, `inertia` (numbers as TOML), when the body has mass.
     pub mass: Option<(String, [String; 3], [String; 6])>,
     pub origin: Origin,
+    /// Keys whose source element is another than the origin's (`transforms` from a joint,
+    /// `inertia` from an `<inertia>`).
+    pub places: Vec<(&'static str, Place)>,
 }
 
 /// One loop, as its TOML keys (`name` first).
@@ -125,12 +130,63 @@ pub struct Imported {
     pub loops: Vec<LoopOut>,
     /// Notes written at the top of the model (what was ignored).
     pub notes: Vec<String>,
+    /// The source's root element (`<robot>`, `<mujoco>`, `<model>`): the place of `[robot]`'s
+    /// imported keys.
+    pub root: Option<Place>,
+}
+
+/// A text of lines, each with the place in a source it comes from.
+#[derive(Default)]
+struct Lines {
+    text: String,
+    places: Vec<Option<Place>>,
+}
+
+impl Lines {
+    fn push(&mut self, line: &str, place: Option<&Place>) {
+        self.text.push_str(line);
+        self.text.push('\n');
+        self.places.push(place.cloned());
+    }
 }
 
 /// Limits on untrusted XML: the file's size, its number of nodes and its depth.
 pub const MAX_BYTES: usize = 16 << 20;
 pub const MAX_NODES: u32 = 1_000_000;
 pub const MAX_DEPTH: usize = 256;
+
+/// Names of the source's joints and bodies (links) the model file renames (`[rename]`), by the
+/// source's name; and, filled by the import, every name the source has.
+#[derive(Debug, Clone, Default)]
+pub struct Renames {
+    pub joints: Vec<(String, String)>,
+    pub bodies: Vec<(String, String)>,
+    /// The source's joint and body names (as the source writes them), in the order read.
+    pub seen_joints: Vec<String>,
+    pub seen_bodies: Vec<String>,
+}
+
+impl Renames {
+    fn joint(&mut self, name: &str) -> String {
+        if !self.seen_joints.iter().any(|s| s == name) {
+            self.seen_joints.push(name.to_string());
+        }
+        match self.joints.iter().find(|(k, _)| k == name) {
+            Some((_, to)) => to.clone(),
+            None => ident(name),
+        }
+    }
+
+    fn body(&mut self, name: &str) -> String {
+        if !self.seen_bodies.iter().any(|s| s == name) {
+            self.seen_bodies.push(name.to_string());
+        }
+        match self.bodies.iter().find(|(k, _)| k == name) {
+            Some((_, to)) => to.clone(),
+            None => ident(name),
+        }
+    }
+}
 
 /// Reads and imports a source file. `shown` is its path as messages show it. Errors (all of
 /// them) point into the source; the warnings are rendered apart (the model still imports).
@@ -139,6 +195,17 @@ pub fn import_file(
     shown: &str,
     format: Format,
 ) -> Result<(Imported, Diagnostics), Diagnostics> {
+    import_renamed(path, shown, format, &mut Renames::default())
+}
+
+/// [`import_file`], with the joints and bodies `renames` names renamed (a note each in the
+/// written model); `renames` gets the source's names.
+pub fn import_renamed(
+    path: &Path,
+    shown: &str,
+    format: Format,
+    renames: &mut Renames,
+) -> Result<(Imported, Diagnostics), Diagnostics> {
     let text = read_xml(path, shown)?;
     // MJCF's `<include>`s: every file read (and checked) before the walk.
     let includes = match format {
@@ -146,6 +213,7 @@ pub fn import_file(
         _ => Vec::new(),
     };
     let mut cx = xml::Cx::new(shown, &text);
+    cx.renames = std::mem::take(renames);
     for (_, p, t) in &includes {
         cx.add_file(p, t);
     }
@@ -167,6 +235,7 @@ pub fn import_file(
         Format::Sdf => sdf::import(&mut cx, &doc),
     };
     let extra: Vec<String> = cx.included().iter().map(|t| t.to_string()).collect();
+    *renames = std::mem::take(&mut cx.renames);
     let (errors, warnings) = cx.finish();
     if let Some(errors) = errors {
         return Err(errors);
@@ -196,6 +265,16 @@ pub fn import_file(
         .into_iter()
         .next()
         .unwrap_or_else(|| Diagnostics::new(shown, text.clone(), Vec::new()));
+    for (kind, list, seen) in [
+        ("joint", &renames.joints, &renames.seen_joints),
+        ("body", &renames.bodies, &renames.seen_bodies),
+    ] {
+        for (from, to) in list.iter().filter(|(f, _)| seen.contains(f)) {
+            imported.notes.push(format!(
+                "{kind} `{from}` of {shown} is `{to}` here (the model file's `[rename]`)"
+            ));
+        }
+    }
     imported.format = Some(format);
     let mut hashed = text.replace("\r\n", "\n");
     for included in &extra {
@@ -241,17 +320,32 @@ impl Imported {
     /// element (the text a model file is merged with: an error the model's checks find there,
     /// an inertia, is located in the source too).
     pub fn render_with(&self, every_line: bool) -> String {
-        let mut s = String::new();
+        self.render_lines(every_line).text
+    }
+
+    /// The text a model file is merged with ([`Imported::render_with`], every line commented),
+    /// and for each of its lines the place in the source it comes from.
+    pub fn render_mapped(&self) -> (String, Vec<Option<Place>>) {
+        let l = self.render_lines(true);
+        (l.text, l.places)
+    }
+
+    fn render_lines(&self, every_line: bool) -> Lines {
+        let mut s = Lines::default();
         if let Some(src) = &self.source {
-            s.push_str(&format!(
-                "# Imported by rbss-codegen from {} (sha256 {}).\n",
-                src.path, src.sha256
-            ));
+            s.push(
+                &format!(
+                    "# Imported by rbss-codegen from {} (sha256 {}).",
+                    src.path, src.sha256
+                ),
+                None,
+            );
         }
         for n in &self.notes {
-            s.push_str(&format!("# note: {n}\n"));
+            s.push(&format!("# note: {n}"), None);
         }
-        s.push_str("\ncoordinates = [\n");
+        s.push("", None);
+        s.push("coordinates = [", None);
         for c in &self.coordinates {
             let mut keys = format!("name = {}, unit = \"{}\"", quote(&c.name), c.unit);
             for (k, v) in [
@@ -266,34 +360,56 @@ impl Imported {
                     keys.push_str(&format!(", {k} = {v}"));
                 }
             }
-            s.push_str(&format!("  {{ {keys} }},{}\n", comment(&c.origin)));
+            s.push(
+                &format!("  {{ {keys} }},{}", comment(&c.origin)),
+                c.origin.place.as_ref(),
+            );
         }
-        s.push_str("]\n\n[robot]\n");
-        s.push_str(&format!("name = {}\n", quote(&self.name)));
+        s.push("]", None);
+        s.push("", None);
+        let root = self.root.as_ref();
+        s.push("[robot]", root);
+        s.push(&format!("name = {}", quote(&self.name)), root);
         if !self.description.is_empty() {
-            s.push_str(&format!("description = {}\n", quote(&self.description)));
+            s.push(&format!("description = {}", quote(&self.description)), root);
         }
-        s.push_str(&format!("gravity = [{}]\n", self.gravity.join(", ")));
+        s.push(&format!("gravity = [{}]", self.gravity.join(", ")), root);
         let names: Vec<String> = self.actuated.iter().map(|a| quote(a)).collect();
-        s.push_str(&format!("actuated = [{}]\n", names.join(", ")));
+        s.push(&format!("actuated = [{}]", names.join(", ")), root);
         for b in &self.bodies {
             let (head, c) = lines_comment(&b.origin, every_line);
-            s.push_str(&format!("\n[[body]]{head}\n"));
-            s.push_str(&format!("name = {}{c}\n", quote(&b.name)));
+            let at = |key: &str| {
+                b.places
+                    .iter()
+                    .find(|(k, _)| *k == key)
+                    .map(|(_, p)| p)
+                    .or(b.origin.place.as_ref())
+            };
+            s.push("", None);
+            s.push(&format!("[[body]]{head}"), b.origin.place.as_ref());
+            s.push(&format!("name = {}{c}", quote(&b.name)), at("name"));
             if b.parent != "world" {
-                s.push_str(&format!("parent = {}{c}\n", quote(&b.parent)));
+                s.push(&format!("parent = {}{c}", quote(&b.parent)), at("parent"));
             }
-            s.push_str(&format!("transforms = [{}]{c}\n", b.transforms.join(", ")));
+            s.push(
+                &format!("transforms = [{}]{c}", b.transforms.join(", ")),
+                at("transforms"),
+            );
             if let Some((m, com, inertia)) = &b.mass {
-                s.push_str(&format!("mass = {m}{c}\ncom = [{}]{c}\n", com.join(", ")));
-                s.push_str(&format!("inertia = [{}]{c}\n", inertia.join(", ")));
+                s.push(&format!("mass = {m}{c}"), at("mass"));
+                s.push(&format!("com = [{}]{c}", com.join(", ")), at("com"));
+                s.push(
+                    &format!("inertia = [{}]{c}", inertia.join(", ")),
+                    at("inertia"),
+                );
             }
         }
         for l in &self.loops {
             let (head, c) = lines_comment(&l.origin, every_line);
-            s.push_str(&format!("\n[[loop]]{head}\n"));
+            s.push("", None);
+            s.push(&format!("[[loop]]{head}"), l.origin.place.as_ref());
             for (k, v) in &l.keys {
-                s.push_str(&format!("{k} = {v}{c}\n"));
+                s.push(&format!("{k} = {v}{c}"), l.origin.place.as_ref());
             }
         }
         s

@@ -26,6 +26,7 @@ use super::xml::{Cx, child, children, element};
 use super::{
     BodyOut, Coord, Imported, LoopOut, Origin, fnum, ident, joint_steps, number, quote, unit,
 };
+use crate::diagnostics::Place;
 
 /// A frame in the model's frame: as steps (exact, folded at generation) and as numbers.
 #[derive(Clone)]
@@ -91,6 +92,7 @@ pub(super) fn import(cx: &mut Cx<'_>, doc: &Document<'_>) -> Option<Imported> {
         name: ident(&model.attribute("name").unwrap_or("robot").to_lowercase()),
         description: format!("imported from {}", cx.path),
         gravity: ["0".into(), "0".into(), "-9.81".into()],
+        root: Some(cx.place(model)),
         ..Imported::default()
     };
     if let Some(g) = world
@@ -177,20 +179,19 @@ fn free_root<'a, 'i>(
     let Some(abs) = abs_of(cx, frames, name) else {
         return;
     };
-    let origin = Origin {
-        element: element(l),
-        at: cx.at(l),
-    };
-    let (coords, step) = super::free_joint(&format!("{}_free", ident(name)), &origin);
+    let origin = cx.origin(l);
+    let body = cx.body_name(name);
+    let (coords, step) = super::free_joint(&format!("{body}_free"), &origin);
     out.coordinates.extend(coords);
     let mut transforms = abs.steps.clone();
     transforms.push(step);
     out.bodies.push(BodyOut {
-        name: ident(name),
+        name: body,
         parent: "world".into(),
         transforms,
         mass: child(l, "inertial").and_then(|i| inertial(cx, i)),
         origin,
+        places: inertial_places(cx, l),
     });
 }
 
@@ -302,7 +303,7 @@ fn bodies<'a, 'i>(
         else {
             continue;
         };
-        let jname = ident(j.attribute("name").unwrap_or(""));
+        let jname = cx.joint_name(j.attribute("name").unwrap_or(""));
         let kind = j.attribute("type").unwrap_or("");
         let mut transforms = Vec::new();
         // A pose that failed is reported; the joint and the link are still checked.
@@ -317,6 +318,7 @@ fn bodies<'a, 'i>(
         let origin = Origin {
             element: format!("{} {}", element(l), element(j)),
             at: cx.at(j),
+            place: Some(cx.place(l)),
         };
         match kind {
             "fixed" => {}
@@ -325,10 +327,7 @@ fn bodies<'a, 'i>(
                 let mut coord = Coord {
                     name: jname.clone(),
                     unit: if kind == "prismatic" { "m" } else { "rad" },
-                    origin: Origin {
-                        element: element(j),
-                        at: cx.at(j),
-                    },
+                    origin: cx.origin(j),
                     ..Coord::default()
                 };
                 dynamics(cx, j, &mut coord);
@@ -387,15 +386,19 @@ fn bodies<'a, 'i>(
             continue;
         }
         out.bodies.push(BodyOut {
-            name: ident(&c),
+            name: cx.body_name(&c),
             parent: if p == "world" {
                 "world".into()
             } else {
-                ident(&p)
+                cx.body_name(&p)
             },
             transforms,
             mass,
             origin,
+            places: [("transforms", cx.place(j)), ("parent", cx.place(j))]
+                .into_iter()
+                .chain(inertial_places(cx, l))
+                .collect(),
         });
     }
 }
@@ -409,7 +412,7 @@ fn loops<'a, 'i>(
 ) {
     for &j in closing {
         let (p, c) = ends(j);
-        let name = ident(j.attribute("name").unwrap_or(""));
+        let name = cx.joint_name(j.attribute("name").unwrap_or(""));
         let kind = match j.attribute("type").unwrap_or("") {
             "ball" => "ball",
             "revolute" | "continuous" => "hinge",
@@ -448,11 +451,11 @@ fn loops<'a, 'i>(
         }
         at_parent.extend(ca.steps.iter().cloned());
         at_parent.extend(at_child.iter().cloned());
-        let side = |body: &str, steps: &[String]| {
+        let side = |cx: &mut Cx<'_>, body: &str, steps: &[String]| {
             let b = if body == "world" {
                 "world".to_string()
             } else {
-                ident(body)
+                cx.body_name(body)
             };
             if steps.is_empty() {
                 format!("{{ body = {} }}", quote(&b))
@@ -467,18 +470,15 @@ fn loops<'a, 'i>(
         let mut keys = vec![
             ("name", quote(&name)),
             ("kind", quote(kind)),
-            ("a", side(&p, &at_parent)),
-            ("b", side(&c, &at_child)),
+            ("a", side(cx, &p, &at_parent)),
+            ("b", side(cx, &c, &at_child)),
         ];
         if let Some(a) = axis_key {
             keys.push(("axis", quote(a)));
         }
         out.loops.push(LoopOut {
             keys,
-            origin: Origin {
-                element: element(j),
-                at: cx.at(j),
-            },
+            origin: cx.origin(j),
         });
     }
 }
@@ -738,4 +738,15 @@ fn inertial(cx: &mut Cx<'_>, i: Node<'_, '_>) -> Option<(String, [String; 3], [S
         return None;
     }
     Some((number(&mt, mv), com, turned.map(fnum)))
+}
+
+/// The places of a link's mass properties: its `<inertial>`'s `<mass>`, `<pose>`, `<inertia>`.
+fn inertial_places(cx: &Cx<'_>, l: Node<'_, '_>) -> Vec<(&'static str, Place)> {
+    let Some(i) = child(l, "inertial") else {
+        return Vec::new();
+    };
+    [("mass", "mass"), ("com", "pose"), ("inertia", "inertia")]
+        .into_iter()
+        .map(|(key, tag)| (key, cx.place(child(i, tag).unwrap_or(i))))
+        .collect()
 }

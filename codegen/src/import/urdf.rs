@@ -41,6 +41,7 @@ pub(super) fn import(cx: &mut Cx<'_>, doc: &Document<'_>) -> Option<Imported> {
     let mut out = Imported {
         name: ident(&root.attribute("name").unwrap_or("robot").to_lowercase()),
         gravity: ["0".into(), "0".into(), "-9.81".into()],
+        root: Some(cx.place(root)),
         ..Imported::default()
     };
     out.description = format!("imported from {}", cx.path);
@@ -189,22 +190,16 @@ fn coordinates(cx: &mut Cx<'_>, joints: &[Node<'_, '_>], out: &mut Imported) {
         if kind == "fixed" {
             continue;
         }
-        let name = ident(j.attribute("name").unwrap_or(""));
+        let name = cx.joint_name(j.attribute("name").unwrap_or(""));
         if kind == "floating" {
-            let origin = Origin {
-                element: element(j),
-                at: cx.at(j),
-            };
+            let origin = cx.origin(j);
             out.coordinates.extend(super::free_joint(&name, &origin).0);
             continue;
         }
         let mut c = Coord {
             name: name.clone(),
             unit: if kind == "prismatic" { "m" } else { "rad" },
-            origin: Origin {
-                element: element(j),
-                at: cx.at(j),
-            },
+            origin: cx.origin(j),
             ..Coord::default()
         };
         if let Some(d) = child(j, "dynamics") {
@@ -247,7 +242,7 @@ fn coordinates(cx: &mut Cx<'_>, joints: &[Node<'_, '_>], out: &mut Imported) {
                     ("name", quote(&format!("mimic_{name}"))),
                     ("kind", quote("coupling")),
                     ("a", quote(&name)),
-                    ("b", quote(&ident(of))),
+                    ("b", quote(&cx.joint_name(of))),
                 ];
                 if let Some((t, v)) = ratio {
                     keys.push(("ratio", number(&t, v)));
@@ -259,7 +254,7 @@ fn coordinates(cx: &mut Cx<'_>, joints: &[Node<'_, '_>], out: &mut Imported) {
                     keys,
                     origin: Origin {
                         element: "<mimic>".into(),
-                        at: cx.at(m),
+                        ..cx.origin(m)
                     },
                 });
             }
@@ -291,11 +286,11 @@ fn bodies(cx: &mut Cx<'_>, root: Node<'_, '_>, tree: &Tree<'_, '_>, out: &mut Im
             .unwrap_or("");
         kids.entry(p).or_default().push(c);
     }
-    let name_of = |l: &str| {
+    let name_of = |cx: &mut Cx<'_>, l: &str| {
         if l == base {
             "world".to_string()
         } else {
-            ident(l)
+            cx.body_name(l)
         }
     };
     let mut seen = 0usize;
@@ -335,7 +330,7 @@ fn bodies(cx: &mut Cx<'_>, root: Node<'_, '_>, tree: &Tree<'_, '_>, out: &mut Im
         }
         let kind = j.attribute("type").unwrap_or("");
         if kind == "floating" {
-            let name = ident(j.attribute("name").unwrap_or(""));
+            let name = cx.joint_name(j.attribute("name").unwrap_or(""));
             transforms.push(super::free_joint(&name, &Origin::default()).1);
         } else if kind != "fixed" {
             let axis = match child(j, "axis") {
@@ -352,11 +347,8 @@ fn bodies(cx: &mut Cx<'_>, root: Node<'_, '_>, tree: &Tree<'_, '_>, out: &mut Im
                     } else {
                         "revolute"
                     };
-                    transforms.extend(joint_steps(
-                        k,
-                        &ident(j.attribute("name").unwrap_or("")),
-                        axis,
-                    ));
+                    let q = cx.joint_name(j.attribute("name").unwrap_or(""));
+                    transforms.extend(joint_steps(k, &q, axis));
                 }
                 None if axis.is_some() => {
                     let a = child(j, "axis").unwrap_or(j);
@@ -374,15 +366,28 @@ fn bodies(cx: &mut Cx<'_>, root: Node<'_, '_>, tree: &Tree<'_, '_>, out: &mut Im
             transforms.push(quote("Tz(0)"));
         }
         let mass = child(links[l], "inertial").and_then(|i| inertial(cx, i));
+        // Errors of the body's keys at the elements they come from: the steps and the parent
+        // at the joint, the mass properties at `<mass>`, `<origin>`, `<inertia>`.
+        let mut places = vec![("transforms", cx.place(j))];
+        if let Some(p) = child(j, "parent") {
+            places.push(("parent", cx.place(p)));
+        }
+        if let Some(i) = child(links[l], "inertial") {
+            for (key, tag) in [("mass", "mass"), ("com", "origin"), ("inertia", "inertia")] {
+                places.push((key, cx.place(child(i, tag).unwrap_or(i))));
+            }
+        }
         out.bodies.push(BodyOut {
-            name: ident(l),
-            parent: name_of(parent),
+            name: cx.body_name(l),
+            parent: name_of(cx, parent),
             transforms,
             mass,
             origin: Origin {
                 element: format!("{} {}", element(links[l]), element(j)),
                 at: cx.at(j),
+                place: Some(cx.place(links[l])),
             },
+            places,
         });
     }
     if seen != link_order.len() {

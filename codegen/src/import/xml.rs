@@ -7,7 +7,7 @@ use std::ops::Range;
 use roxmltree::{Document, Node, ParsingOptions};
 
 use super::{MAX_DEPTH, MAX_NODES};
-use crate::diagnostics::{Diagnostic, Diagnostics};
+use crate::diagnostics::{Diagnostic, Diagnostics, Place};
 use crate::model::Pos;
 use crate::source::LineIndex;
 
@@ -28,6 +28,8 @@ pub(crate) struct Cx<'t> {
     current: Cell<usize>,
     errors: Vec<(usize, Diagnostic)>,
     warnings: Vec<(usize, Diagnostic)>,
+    /// The model file's renames; the source's names seen.
+    pub(crate) renames: super::Renames,
 }
 
 impl<'t> Cx<'t> {
@@ -38,9 +40,20 @@ impl<'t> Cx<'t> {
             current: Cell::new(0),
             errors: Vec::new(),
             warnings: Vec::new(),
+            renames: super::Renames::default(),
         };
         cx.add_file(path, text);
         cx
+    }
+
+    /// The identifier of the source's joint `name`: the model file's rename, else [`super::ident`].
+    pub(crate) fn joint_name(&mut self, name: &str) -> String {
+        self.renames.joint(name)
+    }
+
+    /// The identifier of the source's body (link) `name`: as [`Cx::joint_name`].
+    pub(crate) fn body_name(&mut self, name: &str) -> String {
+        self.renames.body(name)
     }
 
     /// Adds an included file; its index.
@@ -219,6 +232,29 @@ impl<'t> Cx<'t> {
         self.enter(node);
         let f = &self.files[self.current.get()];
         format!("{}:{}", f.path, self.pos(node.range().start).line)
+    }
+
+    /// The place of an element's tag name (where an error of what it imports to is reported).
+    pub(crate) fn place(&self, node: Node<'_, '_>) -> Place {
+        let r = self.tag(node);
+        let f = &self.files[self.current.get()];
+        let pos = f.lines.pos(r.start);
+        let line = f.text.split('\n').nth(pos.line - 1).unwrap_or("");
+        Place {
+            path: f.path.clone(),
+            pos,
+            len: r.len(),
+            line: line.strip_suffix('\r').unwrap_or(line).to_string(),
+        }
+    }
+
+    /// The origin of what `node` imports to: the element, its line, its place.
+    pub(crate) fn origin(&self, node: Node<'_, '_>) -> super::Origin {
+        super::Origin {
+            element: element(node),
+            at: self.at(node),
+            place: Some(self.place(node)),
+        }
     }
 
     /// The range of an element's tag name.

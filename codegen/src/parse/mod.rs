@@ -131,7 +131,7 @@ pub fn parse_model_with_warnings(
     // (crate::import::merge); every position stays the model file's.
     let resolved = match crate::import::merge::source_key(doc.get_ref()) {
         None => None,
-        Some(key) => match crate::import::merge::resolve(path, source, key) {
+        Some(key) => match crate::import::merge::resolve(path, source, doc.get_ref(), key) {
             Ok(r) => Some(r),
             Err(d) => return (Err(d), no_warnings()),
         },
@@ -156,6 +156,11 @@ pub fn parse_model_with_warnings(
             }
         },
     };
+    // An imported model's errors and warnings at the source's elements (crate::import::merge::SourceMap).
+    let relocated = |d: Diagnostics| match &resolved {
+        Some(r) => r.map.relocate(d, text),
+        None => d,
+    };
     let mut p = Parser::new(text);
     p.imported_from = resolved.as_ref().map_or(usize::MAX, |r| r.start);
     let root = p.expand(doc_root);
@@ -170,9 +175,10 @@ pub fn parse_model_with_warnings(
                     source: r.source.clone(),
                     model_len: source.len(),
                     text: r.text.clone(),
+                    map: r.map.clone(),
                 });
             }
-            (Ok(model), Diagnostics::new(path, text, warnings))
+            (Ok(model), relocated(Diagnostics::new(path, text, warnings)))
         }
         _ => {
             let mut items = p.once_per_template();
@@ -185,7 +191,10 @@ pub fn parse_model_with_warnings(
                     "",
                 ));
             }
-            (Err(Diagnostics::new(path, text, items)), no_warnings())
+            (
+                Err(relocated(Diagnostics::new(path, text, items))),
+                no_warnings(),
+            )
         }
     }
 }

@@ -4,6 +4,20 @@ use super::*;
 
 impl<'s> Parser<'s> {
     pub(super) fn model(&mut self, root: &DeTable<'_>) -> Option<Model> {
+        // `[rename]` renames an imported source's names (crate::import::merge); a model
+        // reaching here with one imports none.
+        if let Some((k, _)) = root
+            .iter()
+            .find(|(k, _)| k.get_ref().as_ref() == crate::import::merge::RENAME)
+        {
+            self.skip_keys.push(k.span().start);
+            let d = self.cx.error(
+                &k.span(),
+                "`rename` renames the joints and bodies of an imported source, but this model imports none",
+                "no `urdf`, `mjcf` or `sdf` key",
+            );
+            d.help = Some("name the source at the top: `urdf = \"arm.urdf\"`".into());
+        }
         self.check_keys(root, &(0..0), TOP_KEYS, "at the top level");
         let top = Pos { line: 1, col: 1 };
 
