@@ -9,10 +9,16 @@
 //! kinematics says it needs outputs. With a second line naming link 6's frame as the outputs
 //! (`robot.outputs = [{ frame = "link6", pose = "xyz-rpy" }]`), `rbss fk` gives the test's
 //! flange pose, `rbss ik` joints whose flange is the asked pose, and `rbss fd` the plain arm's
-//! accelerations (the task frame adds no mass).
+//! accelerations (the task frame adds no mass). With the frame as outputs the imported
+//! actuators stay (the six joints): inverse dynamics, through the model's library, gives the
+//! test's Lagrangian's torques, and forward dynamics under them the motion back.
+
+mod common;
 
 use std::path::Path;
 use std::process::Command;
+
+use common::robot_lib::{RobotLib, library};
 
 /// One link and the joint that carries it: the joint's origin (xyz, rpy) in the parent's
 /// frame, its axis, then the link's mass, centre of mass and inertial frame (xyz, rpy) and its
@@ -661,4 +667,80 @@ fn a_urdf_arm_with_its_tool_frame_as_outputs_runs_fk_ik_and_fd() {
     }
     eprintln!("fd: the task frame changes the joints' accelerations by {worst:e} (relative)");
     assert!(worst < 1e-12, "fd with the task frame differs by {worst:e}");
+}
+
+#[test]
+fn a_urdf_arm_with_its_tool_frame_and_its_actuators_runs_inverse_dynamics() {
+    let tmp = tempfile::Builder::new()
+        .prefix("rbss-urdf-id-")
+        .tempdir()
+        .unwrap();
+    let dir = tmp.path();
+    std::fs::write(dir.join("arm6.urdf"), urdf()).unwrap();
+    let model = dir.join("arm6_tool.toml");
+    std::fs::write(
+        &model,
+        "urdf = \"arm6.urdf\"\nrobot.outputs = [{ frame = \"link6\", pose = \"xyz-rpy\" }]\n",
+    )
+    .unwrap();
+    let robot = RobotLib::open(&library(&model, &dir.join("cache")));
+    // The six joints actuated (the importer's), the frame's six coordinates the outputs.
+    assert_eq!((robot.n, robot.m, robot.k, robot.p), (12, 6, 6, 6));
+    assert_eq!(
+        (0..6).map(|i| robot.actuated(i)).collect::<Vec<_>>(),
+        [0, 1, 2, 3, 4, 5]
+    );
+    assert_eq!(
+        (0..6).map(|i| robot.output(i)).collect::<Vec<_>>(),
+        [6, 7, 8, 9, 10, 11]
+    );
+
+    let cases = [
+        (
+            [0.3, -0.7, 1.1, 0.4, -0.9, 0.2],
+            [0.5, -0.4, 0.8, -1.2, 0.6, 1.5],
+            [1.0, 0.5, -2.0, 3.0, -1.5, 0.7],
+        ),
+        (
+            [-0.5, 0.4, -0.8, 1.2, 0.3, -1.0],
+            [-0.3, 0.9, 0.2, 0.4, -1.1, 0.6],
+            [-0.4, 1.5, 0.8, -0.6, 2.0, -1.2],
+        ),
+    ];
+    let (mut worst_u, mut worst_xdd): (f64, f64) = (0.0, 0.0);
+    for (q, qd, qdd) in cases {
+        // The state: the joints and the flange's pose by the test's URDF kinematics (forward
+        // kinematics from the home would start at the frame's pitch of pi/2, where the
+        // roll-pitch-yaw coordinates are singular).
+        let (r, p) = flange(&q);
+        let mut x = q.to_vec();
+        x.extend(p);
+        x.extend(angles(&r));
+        let x_fk = robot.fk(&q, Some(&x)).unwrap();
+        for (j, (a, b)) in x_fk.iter().zip(&x).enumerate() {
+            assert!((a - b).abs() < 1e-12, "fk X[{j}]: {a} vs the test's {b}");
+        }
+        let xd = robot.forward_velocity(&x, &qd).unwrap();
+        let xdd = robot.forward_acceleration(&x, &xd, &qdd).unwrap();
+        let (u, _) = robot.inverse_dynamics(&x, &xd, &xdd).unwrap();
+        // The test's Lagrangian: U = M(q) (q̈ - q̈₀), q̈₀ the accelerations without forces.
+        let (free, _, _) = oracle(&q, &qd, &[0.0; 6]);
+        let dq: Vec<f64> = qdd.iter().zip(&free).map(|(a, b)| a - b).collect();
+        let want = mat_vec(&mass_matrix(&q), &dq);
+        for (j, (a, b)) in u.iter().zip(&want).enumerate() {
+            let err = (a - b).abs() / (1.0 + b.abs());
+            assert!(
+                err < 1e-6,
+                "U[{j}]: rbss {a:e}, the test's Lagrangian {b:e}"
+            );
+            worst_u = worst_u.max(err);
+        }
+        // Forward dynamics under U: the motion back.
+        let (xdd_fd, _) = robot.forward_dynamics(&x, &xd, &u).unwrap();
+        for (a, b) in xdd_fd.iter().zip(&xdd) {
+            worst_xdd = worst_xdd.max((a - b).abs() / (1.0 + b.abs()));
+        }
+    }
+    eprintln!("id vs the Lagrangian: {worst_u:.1e} (relative); fd(id) Xddot {worst_xdd:.1e}");
+    assert!(worst_xdd < 1e-12, "fd(id(U)) off by {worst_xdd:e}");
 }

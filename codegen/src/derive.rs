@@ -1126,14 +1126,26 @@ fn ik_blocks(
         if let ([], &[j]) = (rows.as_slice(), cols.as_slice()) {
             // A coordinate in no loop: nothing ties it to the outputs.
             let name = &model.coordinates[j].name;
-            errors.push(DeriveError {
-                pos: model.coordinates[j].pos,
-                message: format!(
+            let message = if model.actuated.contains(&j) {
+                format!(
+                    "coordinate `{name}` is actuated and in no loop, so the outputs do not \
+                     determine it and inverse kinematics cannot solve for it: list `{name}` in \
+                     `outputs` as well (a coordinate may be both actuated and an output: inverse \
+                     kinematics then takes it as given, inverse dynamics gives its force), close \
+                     a loop through it, or leave `outputs` out (forward and inverse dynamics, \
+                     simulation and the energy need none)"
+                )
+            } else {
+                format!(
                     "coordinate `{name}` is in no loop, so the outputs do not determine it and \
                      inverse kinematics cannot solve for it: make `{name}` an output, close a \
                      loop through it, or leave `outputs` out (forward and inverse dynamics, \
                      simulation and the energy need none)"
-                ),
+                )
+            };
+            errors.push(DeriveError {
+                pos: model.coordinates[j].pos,
+                message,
             });
         } else if rows.len() != cols.len() {
             let rn: Vec<&str> = rows.iter().map(|&i| names[i].as_str()).collect();

@@ -279,13 +279,21 @@ pub fn diagnose(
             .map(|&j| format!("`{}`", model.coordinates[j].name))
             .collect();
         let col_rank = deps[0].iter().filter(|x| x.is_none()).count();
+        // An actuated coordinate that moves with the outputs held: a hip above a loop that
+        // closes in world axes (its column of G vanishes on the constraint manifold only).
+        let both = if meant == "an output" && moving.iter().any(|j| model.actuated.contains(j)) {
+            " (an actuated coordinate that no loop moves, such as a hip above a knee's loop, \
+             is an output as well: a coordinate may be both)"
+        } else {
+            ""
+        };
         errors.push(DeriveError {
             pos: model.coordinates[cols[c]].pos,
             message: format!(
                 "with {held} held, {} can still move {sampled} (the Jacobian of f in the \
                  {} other coordinates has rank {col_rank}): an equation is missing (a loop \
                  with a component too few, a rotation that a hinge or a weld would fix), or {} \
-                 meant to be {meant}",
+                 meant to be {meant}{both}",
                 listed(&names),
                 cols.len(),
                 if names.len() == 1 {

@@ -42,8 +42,9 @@ pub struct Structure {
     /// of them when every degree of freedom is actuated, more when some are passive (see
     /// [`Structure::fully_actuated`]).
     pub passive: &'static [usize],
-    /// Indices of the output (task) coordinates in `X`, e.g. the platform pose; a subset of
-    /// `passive`. Empty when the model names none: inverse kinematics is then unavailable
+    /// Indices of the output (task) coordinates in `X`, e.g. the platform pose; one may be
+    /// actuated too (a coordinate in no loop, such as a legged robot's hip: inverse kinematics
+    /// takes it as given, inverse dynamics gives its force). Empty when the model names none: inverse kinematics is then unavailable
     /// ([`SolverError::NoOutputs`](crate::SolverError::NoOutputs)) and `ik_blocks` is empty.
     pub outputs: &'static [usize],
     /// Independent inverse-kinematics subsystems; together they cover every constraint row and

@@ -260,10 +260,11 @@ fn check_structure(s: &Structure, n: usize, m: usize) -> Result<(), String> {
     }
     let mut is_output = vec![false; n];
     for &j in s.outputs {
+        // An output may be actuated too (inverse kinematics takes it as given).
         match role.get(j) {
-            Some(2) if !is_output[j] => is_output[j] = true,
-            Some(2) => return Err(format!("output {j} listed twice")),
-            _ => return Err(format!("output {j} is not a passive coordinate")),
+            Some(1 | 2) if !is_output[j] => is_output[j] = true,
+            Some(1 | 2) => return Err(format!("output {j} listed twice")),
+            _ => return Err(format!("output {j} out of range (N = {n})")),
         }
     }
 

@@ -164,7 +164,8 @@ fn model_checks_the_structure() {
             FiveBar.gamma(x, v, g)
         }
     }
-    static OUTPUT_NOT_PASSIVE: Structure = Structure {
+    // An output may be actuated too (a coordinate in no loop), but never in a block.
+    static OUTPUT_IN_A_BLOCK: Structure = Structure {
         outputs: &[0, 5],
         ..STRUCTURE
     };
@@ -202,7 +203,7 @@ fn model_checks_the_structure() {
         ..STRUCTURE
     };
     for s in [
-        &OUTPUT_NOT_PASSIVE,
+        &OUTPUT_IN_A_BLOCK,
         &OVERLAPPING_BLOCKS,
         &NOT_SQUARE,
         &BAD_HOME,

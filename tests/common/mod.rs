@@ -4,6 +4,7 @@
 pub mod golden;
 pub mod kkt;
 pub mod la3;
+pub mod robot_lib;
 
 /// A small deterministic generator (xorshift64*), so every run sees the same states.
 pub struct Rng(u64);

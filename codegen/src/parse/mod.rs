@@ -19,7 +19,8 @@
 //! description = "..."             # optional
 //! gravity = [0, 0, -9.81]         # parameter expressions
 //! actuated = ["d1"]               # coordinates q
-//! outputs = ["x"]                 # task coordinates, disjoint from `actuated`; or a task
+//! outputs = ["x"]                 # task coordinates, one per degree of freedom (may share an
+//!                                 # actuated coordinate: one in no loop must); or a task
 //!                                 # frame: [{ frame = "tool0", pose = "xyz-rpy" }] (`task_frames`)
 //!
 //! [parameters]                    # in order: a value may use only parameters above it

@@ -199,6 +199,46 @@ impl<'s> Parser<'s> {
             }
         }
 
+        // One output per degree of freedom: inverse kinematics holds the outputs and solves the
+        // loops for every other coordinate, so the others must number the equations.
+        if let (Some(coords), Some(loops), Some(robot)) = (&coordinates, &loops, &robot)
+            && coords_ok
+            && structure_ok
+            && let Some(outputs) = &robot.outputs
+            && !outputs.is_empty()
+        {
+            let n = coords.len();
+            let m: usize = loops.iter().map(|l| l.equations()).sum();
+            let k = outputs.len();
+            // (More equations than coordinates: reported above with the actuated ones.)
+            if n.checked_sub(m).is_some_and(|dof| dof != k) {
+                let dof = n as i64 - m as i64;
+                let shared: Vec<String> = outputs
+                    .iter()
+                    .filter(|o| robot.actuated.as_ref().is_some_and(|(a, _)| a.contains(o)))
+                    .map(|&o| format!("`{}`", coords[o].name))
+                    .collect();
+                let d = self.cx.error(
+                    &robot.outputs_key,
+                    format!(
+                        "`outputs` names {k} coordinate{}, but the model has {n} coordinates and {m} constraint equations, so {dof} degree{} of freedom",
+                        if k == 1 { "" } else { "s" },
+                        if dof == 1 { "" } else { "s" }
+                    ),
+                    "one output per degree of freedom",
+                );
+                d.help = Some(if shared.is_empty() {
+                    "inverse kinematics holds the outputs and solves the loops for every other coordinate: name one output per degree of freedom (an actuated coordinate in no loop, such as a hip above a knee's loop or a gripper's slide, is an output too: a coordinate may be both), or leave `outputs` out (dynamics, simulation and the energy need none)".to_string()
+                } else {
+                    format!(
+                        "{} {} actuated as well: a coordinate may be both (inverse kinematics then takes it as given), but it still counts as an output",
+                        shared.join(", "),
+                        if shared.len() == 1 { "is" } else { "are" }
+                    )
+                });
+            }
+        }
+
         // A gear drives a coordinate through its actuator: only actuated coordinates have one.
         if let (Some(coords), Some(robot)) = (&coordinates, &robot)
             && let Some((actuated, _)) = &robot.actuated
@@ -668,39 +708,26 @@ impl<'s> Parser<'s> {
             Some(o) => self.coord_list(o, "outputs"),
             None => Some((Vec::new(), true)),
         };
-        // Disjoint.
-        let mut clash = false;
-        if let (Some((act, _)), Some((out, _))) = (&actuated, &outputs) {
-            for (c, c_span) in out {
-                if let Some((_, a_span)) = act.iter().find(|(a, _)| a == c) {
-                    let name = self.cx.text(c_span).trim_matches(['"', '\'']).to_string();
-                    let first = self.cx.line(a_span);
-                    let d = self.cx.error(
-                        c_span,
-                        format!("coordinate `{name}` is both actuated and an output"),
-                        "also listed in `actuated`",
-                    );
-                    d.help = Some(format!(
-                        "`actuated` (line {first}) and `outputs` must be disjoint: an output is solved for, an actuated coordinate is given"
-                    ));
-                    clash = true;
-                }
-            }
-        }
+        // `actuated` and `outputs` may share a coordinate: inverse kinematics then takes it as
+        // given (as every output), forward kinematics too (as every actuated coordinate), and
+        // inverse dynamics gives its force. That is how a coordinate in no loop (a legged
+        // robot's hip, a gripper's slide) is actuated while outputs are given; whether the
+        // combination can be solved is checked with the loops (the number of outputs, below)
+        // and by the derivation (square inverse-kinematics blocks, the rank at the home).
         let indices = |l: Option<(Vec<(usize, Span)>, bool)>| match l {
-            Some((items, true)) if !clash => {
-                Some(items.into_iter().map(|(i, _)| i).collect::<Vec<_>>())
-            }
+            Some((items, true)) => Some(items.into_iter().map(|(i, _)| i).collect::<Vec<_>>()),
             _ => None,
         };
         let (actuated, outputs) = (indices(actuated), indices(outputs));
         let actuated_key = key_span(t, "actuated").unwrap_or(span.clone());
+        let outputs_key = key_span(t, "outputs").unwrap_or(span.clone());
         Some(RobotSection {
             name,
             description,
             gravity,
             actuated: actuated.map(|a| (a, actuated_key)),
             outputs,
+            outputs_key,
         })
     }
 
@@ -791,4 +818,6 @@ pub(super) struct RobotSection {
     pub(super) gravity: Option<[Expr; 3]>,
     pub(super) actuated: Option<(Vec<usize>, Span)>,
     pub(super) outputs: Option<Vec<usize>>,
+    /// The `outputs` key (the `[robot]` header without one).
+    pub(super) outputs_key: Span,
 }

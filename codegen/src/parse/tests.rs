@@ -940,12 +940,18 @@ fn loop_kinds_parse() {
     }
 }
 
-/// A planar two-link arm (about z, links along x) whose tool frame is an output.
+/// A planar two-link arm (about z, links along x) whose tool frame is an output, and a
+/// spinner of four joints beside it (so that the model has the six degrees of freedom of a
+/// pose output).
 fn two_link(outputs: &str) -> String {
     format!(
         r#"coordinates = [
   {{ name = "q1", unit = "rad", home = 0.3 }},
   {{ name = "q2", unit = "rad", home = -0.5 }},
+  {{ name = "q3", unit = "rad", home = 0 }},
+  {{ name = "q4", unit = "rad", home = 0 }},
+  {{ name = "q5", unit = "rad", home = 0 }},
+  {{ name = "q6", unit = "rad", home = 0 }},
 ]
 
 [robot]
@@ -973,6 +979,13 @@ inertia = [0.01, 0.01, 0.01, 0, 0, 0]
 name = "tool"
 parent = "fore"
 transforms = ["Tx(0.4)", "Rx(0.2)"]
+
+[[body]]
+name = "spinner"
+transforms = ["Tz(1)", "Rz(q3)", "Rx(q4)", "Ry(q5)", "Rz(q6)"]
+mass = 1
+com = [0.1, 0, 0]
+inertia = [0.01, 0.01, 0.01, 0, 0, 0]
 "#
     )
 }
@@ -989,6 +1002,10 @@ fn a_task_frame_adds_its_pose_coordinates_and_a_weld() {
         [
             "q1",
             "q2",
+            "q3",
+            "q4",
+            "q5",
+            "q6",
             "tool_x",
             "tool_y",
             "tool_z",
@@ -997,7 +1014,7 @@ fn a_task_frame_adds_its_pose_coordinates_and_a_weld() {
             "tool_yaw"
         ]
     );
-    assert_eq!(m.outputs, [2, 3, 4, 5, 6, 7]);
+    assert_eq!(m.outputs, [6, 7, 8, 9, 10, 11]);
     assert_eq!(m.loops.len(), 1);
     assert_eq!(m.loops[0].name, "tool_pose");
     assert!(m.loops[0].is_weld());
@@ -1013,7 +1030,7 @@ fn a_task_frame_adds_its_pose_coordinates_and_a_weld() {
         0.0,
         q1 + q2,
     ];
-    for (c, w) in m.coordinates[2..].iter().zip(want) {
+    for (c, w) in m.coordinates[6..].iter().zip(want) {
         assert!(close(c.home, w, 1e-15), "{}: {} vs {w}", c.name, c.home);
     }
     // The home closes the weld: f(home) = 0.
@@ -1021,10 +1038,11 @@ fn a_task_frame_adds_its_pose_coordinates_and_a_weld() {
 
     let m = parse_ok(
         "two_link.toml",
-        &two_link(r#"[{ frame = "fore", position = true, name = "elbow" }]"#),
+        &two_link(r#"[{ frame = "fore", position = true, name = "elbow" }, "q3", "q4", "q5"]"#),
     );
-    let names: Vec<&str> = m.coordinates[2..].iter().map(|c| c.name.as_str()).collect();
+    let names: Vec<&str> = m.coordinates[6..].iter().map(|c| c.name.as_str()).collect();
     assert_eq!(names, ["elbow_x", "elbow_y", "elbow_z"]);
+    assert_eq!(m.outputs, [6, 7, 8, 2, 3, 4]);
     assert_eq!(m.loops[0].name, "elbow_position");
     assert_eq!(m.loops[0].equations(), 3);
 }

@@ -113,9 +113,15 @@ pub fn forward_dynamics(s: &Structure<'_>) -> Option<Emitted> {
 
 /// Inverse dynamics' block elimination (see `inverse`): the body of
 /// `fn(g, b, u, lambda) -> Option<SolveConditioning>` with its per-block functions, or `None`
-/// when the robot does not have the structure or a block is structurally singular.
+/// when the robot does not have the structure (or has an actuated output) or a block is
+/// structurally singular.
 pub fn inverse_dynamics(s: &Structure<'_>) -> Option<Emitted> {
-    if !structured(s) || s.actuated.len() != s.outputs.len() {
+    // An actuated output (a coordinate in no loop, say) is not emitted for: the runtime's
+    // elimination takes it (its row of the reduced system holds its own force).
+    if !structured(s)
+        || s.actuated.len() != s.outputs.len()
+        || s.actuated.iter().any(|a| s.outputs.contains(a))
+    {
         return None;
     }
     inverse::inverse_dynamics(s)

@@ -17,13 +17,18 @@
 //! (`Structure::ik_blocks`: constraint rows `r_k`, coordinates `c_k`) appear only in the
 //! constraints `r_k`, so their `|c_k|` equations read `G_kkᵀ mu_k = b_k - S_k U_k` with the
 //! square `G_kk = G[r_k, c_k]`: `mu_k = G_kk⁻ᵀ b_k - Σ_a w_a U_a`, `w_a = G_kk⁻ᵀ e_a` for
-//! the actuators `a` of block `k`. The output coordinates (`Structure::outputs`, never
-//! actuated) then give `Σ_k G[r_k, o]ᵀ mu_k = b_o`, a square system of order
-//! `#outputs = #actuated = N - M` in `U` (6 × 6 for the 6-UPS, whose blocks are 3 × 3):
+//! the actuators `a` of block `k`. The output coordinates (`Structure::outputs`) then give
+//! `Σ_k G[r_k, o]ᵀ mu_k = b_o`, a square system of order `#outputs = #actuated = N - M` in
+//! `U` (6 × 6 for the 6-UPS, whose blocks are 3 × 3):
 //!
 //! ```text
 //! A U = G_oᵀ mu⁰ - b_o,     A[o, a] = G[:, o]ᵀ w_a
 //! ```
+//!
+//! An output that is actuated too (a coordinate in no loop, such as a legged robot's hip) is
+//! in no block; its row reads `U_a + G_oᵀ mu = b_o`, so `A[o, a] = -1` for its own actuator
+//! `a` (whose `w_a` is zero), and its column of `G` (zero for a coordinate in no loop) enters
+//! as any output's.
 //!
 //! Since `det [S | Gᵀ] = ± Π_k det G_kk · det A`, `A` is singular exactly at the mechanism's
 //! parallel (type II) singularities, and a singular `G_kk` (an inverse-kinematics
@@ -43,7 +48,7 @@ use crate::linalg;
 use crate::linalg::dot4 as dot;
 use crate::model::{Model, col_dot_structured};
 use crate::plan::mass_times;
-use crate::tasks::{EquationsOfMotion, InverseDynamics, InverseKinematics, Velocity};
+use crate::tasks::{EquationsOfMotion, InverseDynamics, InverseKinematics, Robot, Velocity};
 
 const WHAT_BLOCK: &str = "IK block G_r";
 const WHAT_REDUCED: &str = "reduced inverse-dynamics system A (U)";
@@ -377,7 +382,8 @@ fn eliminate<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
     // w_a = G_kk⁻ᵀ e_c for the actuator a at position c of block k, packed: the block's `k`
     // rows' entries at offset a M of the flattened z (n M <= N M), its block in `owner`.
     let w = z.as_flattened_mut();
-    let mut owner = [0_usize; N];
+    // An actuator in no block (an actuated output) keeps `usize::MAX`: no `w_a`.
+    let mut owner = [usize::MAX; N];
     let mut slot = Slot::default();
     for (bk, blk) in s.ik_blocks.iter().enumerate() {
         slot = slot.next(blk.rows.len());
@@ -415,6 +421,7 @@ fn eliminate<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(
             let wa = &w[a * M..a * M + rows.len()];
             a_mat[r + a * n] = rows.iter().zip(wa).map(|(&i, &wi)| go[i] * wi).sum();
         }
+        actuated_output(model, a_mat, n, r, o);
         u[r] = dot(go, mu) - b[o];
     }
     let piv_n = &mut piv_n[..n];
@@ -503,6 +510,7 @@ fn eliminate_fixed<K: EquationsOfMotion<N, M>, const N: usize, const M: usize, c
             let rk = rows.get(*bk)?;
             a_mat[r + a * n] = rk.iter().zip(wa).map(|(&i, &x)| go[i] * x).sum();
         }
+        actuated_output(model, a_mat, n, r, o);
         u[r] = dot(go, mu) - b[o];
     }
     let piv_n = &mut piv_n[..n];
@@ -531,6 +539,23 @@ fn eliminate_fixed<K: EquationsOfMotion<N, M>, const N: usize, const M: usize, c
         }
     }
     Some(Ok(cond))
+}
+
+/// The reduced system's row `r` for an output `o` that is actuated too (`a` its actuator,
+/// in no block, so `w_a = 0`): its equation `U_a + G_oᵀ mu = b_o` gives
+/// `Σ_a' A[o, a'] U_a' - U_a = G_oᵀ mu⁰ - b_o`, a `-1` in column `a`.
+#[inline]
+fn actuated_output<K: Robot<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    a_mat: &mut [f64],
+    n: usize,
+    r: usize,
+    o: usize,
+) {
+    let a = model.actuator_of[o];
+    if let Some(e) = a_mat.get_mut(r + a.wrapping_mul(n)).filter(|_| a < n) {
+        *e -= 1.0;
+    }
 }
 
 fn dense_solve<K: EquationsOfMotion<N, M>, const N: usize, const M: usize>(

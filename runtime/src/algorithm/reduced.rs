@@ -74,9 +74,9 @@ fn dot_row<const W: usize>(a: &[f64; W], b: &[f64; W]) -> f64 {
 /// (`W_L` the rows of all `W_b` but the last), when it is at most `cond_max / 2`: the matrix is
 /// certified, and the dense path's estimate (a lower bound of the true value) would not have
 /// called it singular. `None` when the structure does not apply (blocks of different orders or
-/// of an order other than 2 and 3, not exactly one actuated column per block, outputs other
-/// than one per block or more than [`WMAX`] or than the row width `fk_width(N - M)`), a `K_b`
-/// is singular or worse conditioned than [`K_COND_MAX`] (the elimination's rounding grows with
+/// of an order other than 2 and 3, not exactly one actuated column per block, an actuated
+/// output, outputs other than one per block or more than [`WMAX`] or than the row width
+/// `fk_width(N - M)`), a `K_b` is singular or worse conditioned than [`K_COND_MAX`] (the elimination's rounding grows with
 /// it), `E` is singular, or the bound does not certify: the caller factors `J_p` densely.
 pub(crate) fn fk_factor<K: Robot<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
@@ -149,6 +149,12 @@ fn fk_factor_fixed<
     let (ik, z) = (s.ik_blocks, s.outputs);
     let (nb, p) = (ik.len(), z.len());
     if p == 0 || p > W || W > WMAX || nb != p || nb > M || B > BMAX {
+        return None;
+    }
+    // The outputs are columns of `J_p`: none may be actuated.
+    if z.iter()
+        .any(|&j| model.actuator_of.get(j) != Some(&usize::MAX))
+    {
         return None;
     }
     let g = &g.data.0;
