@@ -979,15 +979,14 @@ impl Robot {
         x: &Bound<'py, PyAny>,
         xdot: &Bound<'py, PyAny>,
         u: &Bound<'py, PyAny>,
-        coordinates: &Bound<'py, PyAny>,
+        coordinates: &str,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let code = match coordinates.extract::<String>().as_deref() {
-            Ok("outputs") => RBSS_LINEARIZE_OUTPUTS,
-            Ok("actuated") => RBSS_LINEARIZE_ACTUATED,
-            _ => {
+        let code = match coordinates {
+            "outputs" => RBSS_LINEARIZE_OUTPUTS,
+            "actuated" => RBSS_LINEARIZE_ACTUATED,
+            other => {
                 return Err(PyValueError::new_err(format!(
-                    "coordinates: expected 'outputs' or 'actuated', got {}",
-                    coordinates.repr()?
+                    "coordinates: expected 'outputs' or 'actuated', got '{other}'"
                 )));
             }
         };
@@ -1023,16 +1022,15 @@ impl Robot {
         xdot: &Bound<'py, PyAny>,
         u: &Bound<'py, PyAny>,
         h: f64,
-        method: &Bound<'py, PyAny>,
+        method: &str,
         baumgarte: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let code = match method.extract::<String>().as_deref() {
-            Ok("rk4") => RBSS_STEP_RK4,
-            Ok("semi_implicit_euler") => RBSS_STEP_SEMI_IMPLICIT_EULER,
-            _ => {
+        let code = match method {
+            "rk4" => RBSS_STEP_RK4,
+            "semi_implicit_euler" => RBSS_STEP_SEMI_IMPLICIT_EULER,
+            other => {
                 return Err(PyValueError::new_err(format!(
-                    "method: expected 'rk4' or 'semi_implicit_euler', got {}",
-                    method.repr()?
+                    "method: expected 'rk4' or 'semi_implicit_euler', got '{other}'"
                 )));
             }
         };
