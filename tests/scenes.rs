@@ -231,6 +231,7 @@ fn main() {
     forward_dynamics_derivatives(&m, &mut d, &mut fdd, &[0.1, -0.2], None).unwrap();
     show("fdd_dx", fdd.dxddot_dx.as_slice());
     let mut d = Data::new(&m);
+    d.xdot = [0.0; 6];
     let mut lin = Linearization::new();
     linearize(&m, &mut d, &mut lin, &[0.1, -0.2], None, Coordinates::Outputs).unwrap();
     let (mut a, mut b) = ([0.0; 16], [0.0; 8]);
@@ -440,6 +441,7 @@ fn scenes_compile_and_match_the_full_crate() {
         1e-14,
     );
     let (m, mut d) = full_five_bar();
+    d.xdot = [0.0; 6];
     let mut lin = Linearization::new();
     linearize(
         &m,
