@@ -2,12 +2,17 @@
 //! library (librbss_stewart_6ups.so, built with the tests as a dev-dependency) through
 //! `ffi/include/rbss.h`, run, and its printed numbers checked against the kernels: the
 //! inverse-kinematics solution closes the loops, the holding forces hold, and the released
-//! accelerations satisfy the equations of motion and the constraints.
+//! accelerations satisfy the equations of motion and the constraints; the derivatives at the
+//! held state (forward dynamics' with respect to U, the linearisation A and B, an RK4 step's
+//! Jacobians) are the runtime's, and a state off the constraints is refused by rbss_linearize.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use rbss_runtime::{Dynamics, Kernels};
+use rbss_runtime::{
+    Baumgarte, Coordinates, Data, Dynamics, ForwardDynamicsDerivatives, Kernels, Linearization,
+    Model, StepDerivatives, forward_dynamics_derivatives, linearize, rk4_step_derivatives,
+};
 use stewart_6ups::{M, N, Stewart6Ups};
 
 /// The directory of the library: next to the test binary (`target/release/deps`), where cargo
@@ -167,6 +172,54 @@ fn c_program_solves_ik_and_forward_dynamics_through_the_header() {
     // Free fall pulls down: the platform's vertical acceleration is negative.
     let z = s.coordinates.iter().position(|c| *c == "z").unwrap();
     assert!(xddot[z] < -1.0, "z'' = {}", xddot[z]);
+
+    // The derivatives at the held state (xdot = 0, the holding forces), against the runtime's
+    // in this process: the same numbers (printed with 17 digits: exact), column-major.
+    let u = values(&stdout, "hold.u");
+    let model = Model::new(Stewart6Ups::default());
+    let mut data = Data::new(&model);
+    data.x = x;
+    let mut fdd = ForwardDynamicsDerivatives::new();
+    forward_dynamics_derivatives(&model, &mut data, &mut fdd, &u, None).unwrap();
+    let k = u.len();
+    let want: Vec<f64> = (0..k)
+        .flat_map(|j| (0..N).map(move |i| (i, j)))
+        .map(|ij| fdd.dxddot_du[ij])
+        .collect();
+    assert_eq!(values(&stdout, "fdd.dxddot_du"), want);
+    let want: Vec<f64> = (0..k)
+        .flat_map(|j| (0..M).map(move |i| (i, j)))
+        .map(|ij| fdd.dlambda_du[ij])
+        .collect();
+    assert_eq!(values(&stdout, "fdd.dlambda_du"), want);
+    let mut data = Data::new(&model);
+    data.x = x;
+    let mut lin = Linearization::new();
+    linearize(&model, &mut data, &mut lin, &u, None, Coordinates::Outputs).unwrap();
+    let w = 2 * lin.d;
+    let (mut a, mut b) = (vec![0.0; w * w], vec![0.0; w * k]);
+    lin.state_space(&mut a, &mut b).unwrap();
+    let col_major = |m: &[f64], cols: usize| -> Vec<f64> {
+        (0..cols)
+            .flat_map(|j| (0..w).map(move |i| m[i * cols + j]))
+            .collect()
+    };
+    assert_eq!(values(&stdout, "lin.A"), col_major(&a, w));
+    assert_eq!(values(&stdout, "lin.B"), col_major(&b, k));
+    let mut data = Data::new(&model);
+    data.x = x;
+    let mut st = StepDerivatives::new();
+    rk4_step_derivatives(&model, &mut data, &mut st, &u, 1e-3, Baumgarte::NONE).unwrap();
+    assert_eq!(values(&stdout, "rk4.x"), st.x);
+    assert_eq!(values(&stdout, "rk4.fx"), st.jacobian[..4 * N * N]);
+    assert_eq!(
+        values(&stdout, "rk4.fu"),
+        st.jacobian[4 * N * N..2 * N * (2 * N + k)]
+    );
+    // Held still, gravity balanced: the platform's rows of A's velocity block are not all zero
+    // (the linearisation is not trivial) and B is M's inverse on the outputs, non-zero.
+    assert!(b.iter().any(|v| v.abs() > 1e-3), "B = {b:?}");
+    assert!(stdout.contains("error.state_code 5\n"), "{stdout}");
 
     // The error path: a NaN is refused with the argument's name.
     assert!(stdout.contains("error.code 2\n"), "{stdout}");

@@ -150,6 +150,60 @@ fn fresh_cached_stale_and_corrupt_cache() {
     assert_eq!(listed.lines().count(), 1, "{listed}");
     assert_eq!(words(&listed), words(builtin));
 
+    // `rbss linearize --model-file` (issue 36): through the library, the JSON of the
+    // compiled-in robot (A, B, the full derivatives), in both coordinates; a state off the
+    // constraints refused alike.
+    let m = rbss_runtime::Model::new(five_bar::FiveBar::default());
+    let mut d = rbss_runtime::Data::new(&m);
+    rbss_runtime::inverse_velocity(&m, &mut d, &[0.2, -0.1]).unwrap();
+    let state = tmp.path().join("state.json");
+    let json = |x: &[f64]| {
+        serde_json::json!({"X": x, "Xdot": d.xdot.to_vec(), "U": [0.05, -0.02]}).to_string()
+    };
+    std::fs::write(&state, json(&d.x)).unwrap();
+    let state_arg = state.to_str().unwrap();
+    for coordinates in ["outputs", "actuated"] {
+        let run = |robot: [&str; 2]| {
+            rbss(
+                &cache,
+                &[
+                    "linearize",
+                    robot[0],
+                    robot[1],
+                    "--state",
+                    state_arg,
+                    "--coordinates",
+                    coordinates,
+                ],
+                &[],
+            )
+        };
+        let (ok, from_file, stderr) = run(["--model-file", model_arg]);
+        assert!(ok, "{stderr}");
+        assert!(!stderr.contains("compiling"), "{stderr}");
+        let (ok, builtin, stderr) = run(["--model", "five_bar"]);
+        assert!(ok, "{stderr}");
+        assert_eq!(from_file, builtin, "linearize --coordinates {coordinates}");
+        let v: serde_json::Value = serde_json::from_str(&from_file).unwrap();
+        assert_eq!(v["A"].as_array().unwrap().len(), 4, "A is 2d x 2d, d = 2");
+    }
+    let mut off = d.x;
+    off[4] += 0.01;
+    std::fs::write(&state, json(&off)).unwrap();
+    let (ok, _, from_file) = rbss(
+        &cache,
+        &["linearize", "--model-file", model_arg, "--state", state_arg],
+        &[],
+    );
+    assert!(!ok);
+    let (_, _, builtin) = rbss(
+        &cache,
+        &["linearize", "--model", "five_bar", "--state", state_arg],
+        &[],
+    );
+    assert!(from_file.contains("not consistent"), "{from_file}");
+    assert_eq!(from_file, builtin);
+
     // Stale: the model edited (l2 0.25 -> 0.26): a new entry, whose answer is the closed
     // form's for the new length (and differs from the old one's).
     let edited = source.replace("l2 = { value = 0.25,", "l2 = { value = 0.26,");

@@ -2,7 +2,8 @@
 //! temporary crate with all of them as modules, one `cargo build`), and each one's solvers give
 //! the numbers of the full `five_bar` crate; frozen parameters are folded in and the others
 //! still read at run time; a solver of a task the scene lacks does not compile, and the error
-//! names the task. The two scene examples of scenes/README.md are compiled and run in the same crate.
+//! names the task (also for the linearisation, the `derivatives` task's). The two scene
+//! examples of scenes/README.md are compiled and run in the same crate.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -10,8 +11,9 @@ use std::process::Command;
 
 use rbss_codegen::scene::{Task, parse_scene_in};
 use rbss_runtime::{
-    Baumgarte, Data, IntegrateOptions, Method, Model, Simulator, Stabilization, inverse_dynamics,
-    inverse_dynamics_full, inverse_kinematics,
+    Baumgarte, Coordinates, Data, ForwardDynamicsDerivatives, IntegrateOptions, Linearization,
+    Method, Model, Simulator, Stabilization, StepDerivatives, forward_dynamics_derivatives,
+    inverse_dynamics, inverse_dynamics_full, inverse_kinematics, linearize, rk4_step_derivatives,
 };
 
 fn root() -> &'static Path {
@@ -220,6 +222,28 @@ fn main() {
     sim.run(&m, &mut d, 0.2, &mut control, |_| {}).unwrap();
     show("leg_sim", sim.x());
 
+    // The derivatives task: forward dynamics' derivatives, the linearisation on the manifold
+    // (at the home, held still) and an RK4 step's Jacobians, from its kernels alone.
+    let m = Model::new(five_bar_derivatives::FiveBar::default());
+    let mut d = Data::new(&m);
+    d.xdot = XDOT;
+    let mut fdd = ForwardDynamicsDerivatives::new();
+    forward_dynamics_derivatives(&m, &mut d, &mut fdd, &[0.1, -0.2], None).unwrap();
+    show("fdd_dx", fdd.dxddot_dx.as_slice());
+    let mut d = Data::new(&m);
+    d.xdot = [0.0; 6];
+    let mut lin = Linearization::new();
+    linearize(&m, &mut d, &mut lin, &[0.1, -0.2], None, Coordinates::Outputs).unwrap();
+    let (mut a, mut b) = ([0.0; 16], [0.0; 8]);
+    lin.state_space(&mut a, &mut b).unwrap();
+    show("lin_a", &a);
+    show("lin_b", &b);
+    let mut d = Data::new(&m);
+    d.xdot = XDOT;
+    let mut st = StepDerivatives::new();
+    rk4_step_derivatives(&m, &mut d, &mut st, &[0.1, -0.2], 1e-3, Baumgarte::NONE).unwrap();
+    show("rk4_jacobian", &st.jacobian[..12 * 14]);
+
     readme_ik().unwrap();
     readme_id().unwrap();
 }
@@ -405,6 +429,44 @@ fn scenes_compile_and_match_the_full_crate() {
         &mut e,
     );
     assert_close("energy", &parse_line(&out, "energy"), &e, 1e-14);
+    // The derivatives scene: the same derivatives, linearisation and step Jacobians.
+    let (m, mut d) = full_five_bar();
+    d.xdot = XDOT;
+    let mut fdd = ForwardDynamicsDerivatives::new();
+    forward_dynamics_derivatives(&m, &mut d, &mut fdd, &[0.1, -0.2], None).unwrap();
+    assert_close(
+        "fdd_dx",
+        &parse_line(&out, "fdd_dx"),
+        fdd.dxddot_dx.as_slice(),
+        1e-14,
+    );
+    let (m, mut d) = full_five_bar();
+    d.xdot = [0.0; 6];
+    let mut lin = Linearization::new();
+    linearize(
+        &m,
+        &mut d,
+        &mut lin,
+        &[0.1, -0.2],
+        None,
+        Coordinates::Outputs,
+    )
+    .unwrap();
+    let (mut a, mut b) = ([0.0; 16], [0.0; 8]);
+    lin.state_space(&mut a, &mut b).unwrap();
+    assert_close("lin_a", &parse_line(&out, "lin_a"), &a, 1e-14);
+    assert_close("lin_b", &parse_line(&out, "lin_b"), &b, 1e-14);
+    assert!(b.iter().any(|v| v.abs() > 1e-3), "B = {b:?}");
+    let (m, mut d) = full_five_bar();
+    d.xdot = XDOT;
+    let mut st = StepDerivatives::new();
+    rk4_step_derivatives(&m, &mut d, &mut st, &[0.1, -0.2], 1e-3, Baumgarte::NONE).unwrap();
+    assert_close(
+        "rk4_jacobian",
+        &parse_line(&out, "rk4_jacobian"),
+        &st.jacobian[..12 * 14],
+        1e-14,
+    );
     // Only l1 frozen: l2 = 0.26 from the run-time Params changes the solution like the full
     // crate's with the same Params.
     let p = five_bar::Params {
@@ -492,6 +554,40 @@ fn main() {
         assert!(stderr.contains(want), "no `{want}` in:\n{stderr}");
     }
     // Only that call fails: inverse kinematics is offered.
+    assert_eq!(stderr.matches("error[E0277]").count(), 1, "{stderr}");
+}
+
+/// The linearisation and the step's Jacobians are the `derivatives` task's: a scene with
+/// forward dynamics alone does not compile them, and the error names the task.
+#[test]
+fn linearize_needs_the_derivatives_task() {
+    let fd = module(
+        "five_bar_forward_dynamics",
+        "model = \"../models/five_bar.toml\"\ntasks = [\"forward_dynamics\"]\n",
+    );
+    let main = r#"
+fn main() {
+    use rbss_runtime::*;
+    let m = Model::new(five_bar_forward_dynamics::FiveBar::default());
+    let mut d = Data::new(&m);
+    forward_dynamics(&m, &mut d, &[0.1, -0.2], None, Baumgarte::NONE).unwrap();
+    let mut lin = Linearization::new();
+    linearize(&m, &mut d, &mut lin, &[0.1, -0.2], None, Coordinates::Outputs).unwrap();
+}
+"#;
+    let out = build_crate(
+        &work_dir().join("missing_derivatives"),
+        &[("five_bar_forward_dynamics".into(), fd)],
+        main,
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "compiled:\n{stderr}");
+    for want in [
+        "the trait bound `FiveBar: rbss_runtime::tasks::Derivatives<6, 4>` is not satisfied: `FiveBar` was generated without the `derivatives` task",
+        "add \"derivatives\" to the `tasks` of its scene file and regenerate",
+    ] {
+        assert!(stderr.contains(want), "no `{want}` in:\n{stderr}");
+    }
     assert_eq!(stderr.matches("error[E0277]").count(), 1, "{stderr}");
 }
 

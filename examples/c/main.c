@@ -73,11 +73,40 @@ int main(void) {
     failed |= check(h, rbss_forward_dynamics(h, x, xdot, u, free_fall, lambda), "rbss_forward_dynamics");
     print_vec("fd.xddot", free_fall, n);
 
-    /* An error: a pose with a NaN is refused with a message. */
+    /* Derivatives at the held state (xdot = 0, the holding forces): matrices column-major. */
+    failed |= check(h, rbss_inverse_dynamics(h, x, xdot, xdot, u, lambda), "rbss_inverse_dynamics");
+    size_t d = n - m, w = 2 * d;
+    double *dx = calloc(n * n, sizeof *dx), *dv = calloc(n * n, sizeof *dv);
+    double *du = calloc(n * k, sizeof *du), *lx = calloc(m * n, sizeof *lx);
+    double *lv = calloc(m * n, sizeof *lv), *lu = calloc(m * k, sizeof *lu);
+    failed |= check(h, rbss_forward_dynamics_derivatives(h, x, xdot, u, xddot, lambda, dx, dv, du,
+                                                         lx, lv, lu),
+                    "rbss_forward_dynamics_derivatives");
+    print_vec("fdd.dxddot_du", du, n * k);
+    print_vec("fdd.dlambda_du", lu, m * k);
+    double *a = calloc(w * w, sizeof *a), *b = calloc(w * k, sizeof *b);
+    failed |= check(h, rbss_linearize(h, RBSS_LINEARIZE_OUTPUTS, x, xdot, u, a, b), "rbss_linearize");
+    print_vec("lin.A", a, w * w);
+    print_vec("lin.B", b, w * k);
+    double *x1 = calloc(n, sizeof *x1), *v1 = calloc(n, sizeof *v1);
+    double *fx = calloc(4 * n * n, sizeof *fx), *fu = calloc(2 * n * k, sizeof *fu);
+    failed |= check(h, rbss_step_derivatives(h, RBSS_STEP_RK4, x, xdot, u, 1e-3, NULL, x1, v1, fx, fu),
+                    "rbss_step_derivatives");
+    print_vec("rk4.x", x1, n);
+    print_vec("rk4.fx", fx, 4 * n * n);
+    print_vec("rk4.fu", fu, 2 * n * k);
+
+    /* Errors: a state off the constraints is refused by rbss_linearize (RBSS_ERR_STATE)... */
+    x[0] += 0.01;
+    int code = rbss_linearize(h, RBSS_LINEARIZE_OUTPUTS, x, xdot, u, a, b);
+    printf("error.state_code %d\n", code);
+    /* ...and a pose with a NaN by rbss_ik, with a message. */
     pose[0] = NAN;
-    int code = rbss_ik(h, pose, NULL, x);
+    code = rbss_ik(h, pose, NULL, x);
     printf("error.code %d\nerror.message %s\n", code, rbss_last_error(h));
 
+    free(dx); free(dv); free(du); free(lx); free(lv); free(lu); free(a); free(b);
+    free(x1); free(v1); free(fx); free(fu);
     free(x); free(xdot); free(xddot); free(free_fall); free(lambda); free(u); free(pose); free(q);
     rbss_free(h);
     return failed;

@@ -46,6 +46,8 @@ pub struct Handle<K, const N: usize, const M: usize> {
     data: Data<N, M>,
     error: CString,
     names: Names,
+    /// The derivative functions' buffers, made by the first of them (`derivatives.rs`).
+    derivatives: Option<Box<derivatives::Workspace<N, M>>>,
 }
 
 /// The structure's names as C strings (made once).
@@ -83,6 +85,7 @@ pub fn new<K: Robot<N, M>, const N: usize, const M: usize>(kernels: K) -> *mut H
                 data,
                 error: CString::default(),
                 names,
+                derivatives: None,
             })
         })
     }));
@@ -339,6 +342,7 @@ impl<K: Robot<N, M>, const N: usize, const M: usize> Handle<K, N, M> {
     }
 }
 
+pub mod derivatives;
 pub mod dynamics;
 mod export;
 pub mod kinematics;

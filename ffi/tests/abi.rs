@@ -128,6 +128,9 @@ fn the_header_is_the_table() {
             "{}: return type",
             f.name
         );
+        // The lengths without their spaces: `stringify!` writes `(2 * n) x (2 * n)` as
+        // `(2 * n) x(2 * n)`.
+        let squash = |l: &str| l.split_whitespace().collect::<String>();
         let want: Vec<(String, String, Option<String>)> = f
             .args
             .iter()
@@ -136,11 +139,17 @@ fn the_header_is_the_table() {
                     "input_or_null" => format!("{l}, or NULL"),
                     _ => l.to_string(),
                 });
+                let len = len.as_deref().map(squash);
                 (c_type(a.kind).unwrap().to_string(), a.name.to_string(), len)
             })
             .collect();
+        let got: Vec<(String, String, Option<String>)> = p
+            .args
+            .iter()
+            .map(|(t, n, l)| (t.clone(), n.clone(), l.as_deref().map(squash)))
+            .collect();
         assert_eq!(
-            p.args, want,
+            got, want,
             "{}: arguments (type, name, length comment)",
             f.name
         );

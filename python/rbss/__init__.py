@@ -5,7 +5,7 @@
     x = robot.ik([0.1, 0, 0.94, 0.1, 0, 0])             # numpy arrays in and out
     xddot, lam = robot.forward_dynamics(x, np.zeros(robot.n), np.zeros(robot.actuated))
 
-Two implementations of one API over the library's C ABI (ffi/include/rbss.h, version 2):
+Two implementations of one API over the library's C ABI (ffi/include/rbss.h, version 3):
 `rbss._native` (python/native: PyO3, compiled once for every robot when the package is installed,
 `pip install ./python`; it loads the library and calls its functions, under 1 us per call over
 the library) when it is importable, else a thin ctypes + numpy layer (about 8 us per call over;
@@ -170,6 +170,39 @@ def _method_code(method):
     if method not in _METHODS:
         raise ValueError(f"method: expected 'dopri5' or 'dop853', got {method!r}")
     return _METHODS[method]
+
+
+# linearize's coordinates and step_derivatives' steps: rbss.h's RBSS_LINEARIZE_* and RBSS_STEP_*.
+_COORDINATES = {"outputs": _abi.RBSS_LINEARIZE_OUTPUTS, "actuated": _abi.RBSS_LINEARIZE_ACTUATED}
+_STEPS = {"rk4": _abi.RBSS_STEP_RK4, "semi_implicit_euler": _abi.RBSS_STEP_SEMI_IMPLICIT_EULER}
+
+
+def _code(table, value, what):
+    if value not in table:
+        expected = " or ".join(repr(k) for k in table)
+        raise ValueError(f"{what}: expected {expected}, got {value!r}")
+    return table[value]
+
+
+# forward_dynamics_derivatives' results, in the order of rbss_forward_dynamics_derivatives.
+_FD_DERIVATIVES = (
+    "xddot",
+    "lambda",
+    "dxddot_dx",
+    "dxddot_dxdot",
+    "dxddot_du",
+    "dlambda_dx",
+    "dlambda_dxdot",
+    "dlambda_du",
+)
+
+
+def _shaped(flat, rows, cols):
+    """Column-major (rows x cols) matrices, one per row of `flat`, as numpy's (..., rows, cols)
+    (a view); cols None: a vector, as it is."""
+    if cols is None:
+        return flat
+    return np.swapaxes(flat.reshape(flat.shape[:-1] + (cols, rows)), -1, -2)
 
 
 def _ptr(a):
@@ -493,3 +526,63 @@ class Robot:
         """psi(X, Xdot) (n values)."""
         ins = [self._arr(x, self.n, "x"), self._arr(xdot, self.n, "xdot")]
         return self._vector("rbss_psi", ins, self.n, out)
+
+    # ---- derivatives ----
+
+    def _shaped_rows(self, fn, ins, shapes):
+        """fn(rows..., outs...) per row; the outputs of the (rows, cols) `shapes` shaped."""
+        lengths = [r * (1 if c is None else c) for r, c in shapes]
+        outs = self._rows(fn, ins, lengths)
+        return [_shaped(o, r, c) for o, (r, c) in zip(outs, shapes)]
+
+    def forward_dynamics_derivatives(self, x, xdot, u):
+        """Forward dynamics at (x, xdot, u) and its derivatives (rbss_forward_dynamics_derivatives):
+        a dict of "xddot" (n,), "lambda" (m,), "dxddot_dx", "dxddot_dxdot" (n, n), "dxddot_du"
+        (n, actuated), "dlambda_dx", "dlambda_dxdot" (m, n), "dlambda_du" (m, actuated); (k, n)
+        inputs give each a leading axis k."""
+        n, m, a = self.n, self.m, self.actuated
+        ins = [self._arr(x, n, "x"), self._arr(xdot, n, "xdot"), self._arr(u, a, "u")]
+        shapes = [(n, None), (m, None), (n, n), (n, n), (n, a), (m, n), (m, n), (m, a)]
+        f = self._lib.rbss_forward_dynamics_derivatives
+
+        def one(*arrays):
+            self._invoke(f, *[_ptr(v) for v in arrays])
+
+        return dict(zip(_FD_DERIVATIVES, self._shaped_rows(one, ins, shapes)))
+
+    def linearize(self, x, xdot, u, coordinates="outputs"):
+        """(A, B) of d/dt [y; ydot] = A [y; ydot] + B U, forward dynamics linearised on the
+        constraint manifold at (x, xdot, u) (rbss_linearize) in the d = n - m independent
+        coordinates y: "outputs" (output_index's) or "actuated" (actuated_index's, fully
+        actuated robots). A (2d, 2d), B (2d, actuated); (k, n) inputs give (k, 2d, 2d) and
+        (k, 2d, actuated). A state off the manifold (max |f(x)| or max |G xdot| above 1e-6) is
+        an RbssError with code RBSS_ERR_STATE."""
+        code = _code(_COORDINATES, coordinates, "coordinates")
+        n, a = self.n, self.actuated
+        w = 2 * (n - self.m)
+        ins = [self._arr(x, n, "x"), self._arr(xdot, n, "xdot"), self._arr(u, a, "u")]
+        f = self._lib.rbss_linearize
+
+        def one(xi, vi, ui, am, bm):
+            self._invoke(f, code, _ptr(xi), _ptr(vi), _ptr(ui), _ptr(am), _ptr(bm))
+
+        return tuple(self._shaped_rows(one, ins, [(w, w), (w, a)]))
+
+    def step_derivatives(self, x, xdot, u, h, method="rk4", baumgarte=None):
+        """One step of h > 0 from the state s = (x, xdot) with u held over it, and its
+        Jacobians (rbss_step_derivatives): (x_next, xdot_next, F_x, F_u), F_x = ds'/ds
+        (2n, 2n; s = (X, Xdot) in that order), F_u = ds'/dU (2n, actuated). method: "rk4" or
+        "semi_implicit_euler"; baumgarte: [alpha, beta] gains on each stage's acceleration
+        (default none). (k, n) inputs give each result a leading axis k."""
+        code = _code(_STEPS, method, "method")
+        n, a = self.n, self.actuated
+        ins = [self._arr(x, n, "x"), self._arr(xdot, n, "xdot"), self._arr(u, a, "u")]
+        gains = self._shared(baumgarte, 2, "baumgarte")
+        g = None if gains is None else _ptr(gains)
+        f = self._lib.rbss_step_derivatives
+        dt = float(h)
+
+        def one(xi, vi, ui, x1, v1, fx, fu):
+            self._invoke(f, code, _ptr(xi), _ptr(vi), _ptr(ui), dt, g, _ptr(x1), _ptr(v1), _ptr(fx), _ptr(fu))
+
+        return tuple(self._shaped_rows(one, ins, [(n, None), (n, None), (2 * n, 2 * n), (2 * n, a)]))

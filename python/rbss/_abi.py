@@ -2,7 +2,7 @@
 # ffi/abi/src/lib.rs (rbss-abi): do not edit. `RBSS_BLESS=1 cargo test --release -p
 # rbss-ffi --test abi` rewrites it; that test fails when it is stale.
 
-ABI_VERSION = 2
+ABI_VERSION = 3
 
 RBSS_OK = 0
 RBSS_ERR_SOLVER = 1
@@ -13,6 +13,10 @@ RBSS_ERR_STATE = 5
 RBSS_ERR_NONFINITE = 6
 RBSS_METHOD_DOPRI5 = 0
 RBSS_METHOD_DOP853 = 1
+RBSS_LINEARIZE_OUTPUTS = 0
+RBSS_LINEARIZE_ACTUATED = 1
+RBSS_STEP_RK4 = 0
+RBSS_STEP_SEMI_IMPLICIT_EULER = 1
 RBSS_COORDINATES = 0
 RBSS_CONSTRAINTS = 1
 RBSS_ACTUATED = 2
@@ -50,4 +54,7 @@ FUNCTIONS = {
     "rbss_gamma": ("int", (("h", "handle", None), ("x", "input", "n"), ("xdot", "input", "n"), ("gamma", "output", "m"))),
     "rbss_mass_matrix": ("int", (("h", "handle", None), ("x", "input", "n"), ("mass", "output", "n x n"))),
     "rbss_psi": ("int", (("h", "handle", None), ("x", "input", "n"), ("xdot", "input", "n"), ("psi", "output", "n"))),
+    "rbss_forward_dynamics_derivatives": ("int", (("h", "handle", None), ("x", "input", "n"), ("xdot", "input", "n"), ("u", "input", "actuated"), ("xddot", "output", "n"), ("lambda", "output", "m"), ("dxddot_dx", "output", "n x n"), ("dxddot_dxdot", "output", "n x n"), ("dxddot_du", "output", "n x actuated"), ("dlambda_dx", "output", "m x n"), ("dlambda_dxdot", "output", "m x n"), ("dlambda_du", "output", "m x actuated"))),
+    "rbss_linearize": ("int", (("h", "handle", None), ("coordinates", "int", None), ("x", "input", "n"), ("xdot", "input", "n"), ("u", "input", "actuated"), ("a", "output", "(2 * (n - m)) x(2 * (n - m))"), ("b", "output", "(2 * (n - m)) x actuated"))),
+    "rbss_step_derivatives": ("int", (("h", "handle", None), ("method", "int", None), ("x", "input", "n"), ("xdot", "input", "n"), ("u", "input", "actuated"), ("dt", "double", None), ("baumgarte", "input_or_null", "2"), ("x_next", "output", "n"), ("xdot_next", "output", "n"), ("fx", "output", "(2 * n) x(2 * n)"), ("fu", "output", "(2 * n) x actuated"))),
 }

@@ -23,7 +23,7 @@
 //! | `forward_dynamics` | [`ForwardDynamics`] | `dynamics_terms`, `constraints`, `forward_dynamics_solve` | `forward_dynamics`, `forward_dynamics_schur` |
 //! | `simulate` | [`Simulate`] | those of `forward_dynamics`, `fk`, `velocity` | `Simulator`, `project_position` |
 //! | `energy` | [`Energy`] | `energy` | `Energy::energy` |
-//! | `derivatives` (implies `forward_dynamics`) | [`Derivatives`] | `dynamics_derivatives` | `forward_dynamics_derivatives`, `inverse_dynamics_derivatives` (with `inverse_dynamics`) |
+//! | `derivatives` (implies `forward_dynamics`) | [`Derivatives`] | `dynamics_derivatives` | `forward_dynamics_derivatives`, `linearize`, `rk4_step_derivatives`, `semi_implicit_euler_step`, `semi_implicit_euler_step_derivatives`, `inverse_dynamics_derivatives` (with `inverse_dynamics`) |
 //!
 //! The `*_solve` entries are the solves the generator emits beside the kernels (optional trait
 //! methods that default to `None`: the solvers then take their general paths).

@@ -10,7 +10,7 @@
 //! | the PyO3 core's function pointers (`python/native`, `rbss._native`) | made from it |
 //! | the ctypes layer's signatures (`python/rbss/_abi.py`) | written from [`FUNCTIONS`]; `ffi/tests/abi.rs` fails when stale (`RBSS_BLESS=1` rewrites) |
 //! | `ffi/include/rbss.h` (prototypes, `#define`s) | checked by `ffi/tests/abi.rs` |
-//! | rbss-ffi's implementations (`kinematics.rs`, `dynamics.rs`) | named by the table: the compiler checks the calls |
+//! | rbss-ffi's implementations (`kinematics.rs`, `dynamics.rs`, `derivatives.rs`) | named by the table: the compiler checks the calls |
 //!
 //! Adding a function: one line here, its implementation in rbss-ffi, its prototype and comment
 //! in `rbss.h`, its method in the Python layers; the tests name what is missing.
@@ -27,7 +27,8 @@
 //!   (`const double *`), `input_or_null` (`const double *`, NULL allowed), `output`
 //!   (`double *`), `int`, `size` (`size_t`), `double`;
 //! - LENGTH (arrays): in doubles, from the sizes `n`, `m`, `actuated`, `outputs`, the argument
-//!   `count`, numbers, `x` for a product (`m x n`, column-major);
+//!   `count`, numbers, `x` for a product (`m x n`, column-major), parenthesised arithmetic of
+//!   them (`(2 * n) x actuated`);
 //! - RETURN: `int` (an `RBSS_*` code), `size`, `u32`, `string` (`const char *`), `handle`,
 //!   `void`;
 //! - PATH (ARGUMENTS): the function of rbss-ffi called with the arguments (the items
@@ -36,7 +37,7 @@
 use std::ffi::c_int;
 
 /// The version of the C ABI: `rbss_abi_version()` returns it; a loader refuses another.
-pub const ABI_VERSION: u32 = 2;
+pub const ABI_VERSION: u32 = 3;
 
 /// Calls `callback!` with the table: `functions!([path::to::callback] tokens...)` expands to
 /// `path::to::callback! { tokens... GROUP fn NAME(...) -> RETURN = PATH(...); ... }`, in the
@@ -92,6 +93,12 @@ macro_rules! functions {
                 = dynamics::mass_matrix(h, x, mass);
             dynamics fn rbss_psi(h: handle, x: input[n], xdot: input[n], psi: output[n]) -> int
                 = dynamics::psi(h, x, xdot, psi);
+            dynamics fn rbss_forward_dynamics_derivatives(h: handle, x: input[n], xdot: input[n], u: input[actuated], xddot: output[n], lambda: output[m], dxddot_dx: output[n x n], dxddot_dxdot: output[n x n], dxddot_du: output[n x actuated], dlambda_dx: output[m x n], dlambda_dxdot: output[m x n], dlambda_du: output[m x actuated]) -> int
+                = derivatives::forward_dynamics_derivatives(h, x, xdot, u, xddot, lambda, dxddot_dx, dxddot_dxdot, dxddot_du, dlambda_dx, dlambda_dxdot, dlambda_du);
+            dynamics fn rbss_linearize(h: handle, coordinates: int, x: input[n], xdot: input[n], u: input[actuated], a: output[(2 * (n - m)) x (2 * (n - m))], b: output[(2 * (n - m)) x actuated]) -> int
+                = derivatives::linearize(h, coordinates, x, xdot, u, a, b);
+            dynamics fn rbss_step_derivatives(h: handle, method: int, x: input[n], xdot: input[n], u: input[actuated], dt: double, baumgarte: input_or_null[2], x_next: output[n], xdot_next: output[n], fx: output[(2 * n) x (2 * n)], fu: output[(2 * n) x actuated]) -> int
+                = derivatives::step_derivatives(h, method, x, xdot, u, dt, baumgarte, x_next, xdot_next, fx, fu);
         }
     };
 }
@@ -196,18 +203,29 @@ constants! {
     RBSS_ERR_NO_DYNAMICS = 3;
     /// A bug: a panic was caught at the boundary.
     RBSS_ERR_PANIC = 4;
-    /// `rbss_simulate*`: the initial state is not consistent with the constraints (`max |f(X)|`
-    /// or `max |G Ẋ|` beyond the tolerance); the message gives the residual. Project it
-    /// explicitly with `rbss_simulate_checked`'s `project`.
+    /// `rbss_simulate*`, `rbss_linearize`: the (initial) state is not consistent with the
+    /// constraints (`max |f(X)|` or `max |G Ẋ|` beyond the tolerance); the message gives the
+    /// residual. Project it explicitly with `rbss_simulate_checked`'s `project`.
     RBSS_ERR_STATE = 5;
     /// A raw kernel's output is not finite (inf or NaN, e.g. at `x = 1e300`): the input is
-    /// outside the range the model's formulas hold in; the outputs are not written.
+    /// outside the range the model's formulas hold in; the outputs are not written. The
+    /// derivative functions (`rbss_forward_dynamics_derivatives`, `rbss_linearize`,
+    /// `rbss_step_derivatives`) report a non-finite value met on the way so too.
     RBSS_ERR_NONFINITE = 6;
     /// `rbss_simulate_method`'s integrator: Dormand–Prince 5(4) (`rbss_simulate`'s).
     RBSS_METHOD_DOPRI5 = 0;
     /// `rbss_simulate_method`'s integrator: Dormand–Prince 8(5,3), fewer steps at tight
     /// tolerances.
     RBSS_METHOD_DOP853 = 1;
+    /// `rbss_linearize`'s independent coordinates: the outputs (`rbss_output`'s order).
+    RBSS_LINEARIZE_OUTPUTS = 0;
+    /// `rbss_linearize`'s independent coordinates: the actuated ones (fully actuated robots).
+    RBSS_LINEARIZE_ACTUATED = 1;
+    /// `rbss_step_derivatives`'s step: classic Runge–Kutta 4.
+    RBSS_STEP_RK4 = 0;
+    /// `rbss_step_derivatives`'s step: semi-implicit (symplectic) Euler,
+    /// `Xdot' = Xdot + dt Xddot`, `X' = X + dt Xdot'`.
+    RBSS_STEP_SEMI_IMPLICIT_EULER = 1;
     /// `rbss_size`: the coordinates `n`.
     RBSS_COORDINATES = 0;
     /// `rbss_size`: the loop-closure equations `m`.
@@ -282,6 +300,6 @@ mod tests {
                 assert_eq!(array, a.len.is_some(), "{}: {}", f.name, a.name);
             }
         }
-        assert_eq!(FUNCTIONS.len(), 29);
+        assert_eq!(FUNCTIONS.len(), 32);
     }
 }

@@ -13,11 +13,12 @@ use numpy::{IxDyn, PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::sync::PyOnceLock;
-use pyo3::types::{IntoPyDict, PyTuple, PyType};
+use pyo3::types::{IntoPyDict, PyDict, PyTuple, PyType};
 
 use rbss_abi::{
     ABI_VERSION, RBSS_ACTUATED, RBSS_CONSTRAINTS, RBSS_COORDINATES, RBSS_DYNAMICS,
-    RBSS_METHOD_DOP853, RBSS_METHOD_DOPRI5, RBSS_OUTPUTS,
+    RBSS_LINEARIZE_ACTUATED, RBSS_LINEARIZE_OUTPUTS, RBSS_METHOD_DOP853, RBSS_METHOD_DOPRI5,
+    RBSS_OUTPUTS, RBSS_STEP_RK4, RBSS_STEP_SEMI_IMPLICIT_EULER,
 };
 
 type H = *mut c_void;
@@ -439,6 +440,38 @@ impl Robot {
         self.rows(py, call, |h, c, r| unsafe {
             f(h, c.input(0, r), c.shared[0], c.output(0, r))
         })
+    }
+
+    /// `f(handle, row)` on every row of the derivative functions' inputs `ins` (x, xdot, u),
+    /// the outputs of the `(rows, cols)` `shapes` made here; then each output shaped: a vector
+    /// (`cols` None) as it is, a column-major matrix as numpy's `(..., rows, cols)` (a view).
+    fn shaped_rows<'py>(
+        &self,
+        py: Python<'py>,
+        ins: &[(&Bound<'py, PyAny>, usize, &str)],
+        shapes: &[(usize, Option<usize>)],
+        mut f: impl FnMut(H, &Call<'py>, usize) -> c_int,
+    ) -> PyResult<Vec<Bound<'py, PyAny>>> {
+        let lengths: Vec<usize> = shapes.iter().map(|&(r, c)| r * c.unwrap_or(1)).collect();
+        let call = Call::new(py, ins, &[], &lengths, None)?;
+        for row in 0..call.k {
+            let code = f(self.h.0, &call, row);
+            self.check(py, code)?;
+        }
+        let mut out = Vec::with_capacity(shapes.len());
+        for ((a, ..), &(rows, cols)) in call.outs.into_iter().zip(shapes) {
+            let a = a.into_any();
+            out.push(match cols {
+                None => a,
+                Some(cols) => {
+                    let mut to: Vec<usize> = if call.batched { vec![call.k] } else { vec![] };
+                    to.extend([cols, rows]);
+                    a.call_method1("reshape", (PyTuple::new(py, to)?,))?
+                        .call_method1("swapaxes", (-1, -2))?
+                }
+            });
+        }
+        Ok(out)
     }
 
     /// A column-major (m x n) kernel per row as numpy's (m, n) (or (k, m, n)), a view.
@@ -867,6 +900,174 @@ impl Robot {
     ) -> PyResult<Bound<'py, PyAny>> {
         let (f, n) = (self.api.rbss_psi, self.n);
         self.two(py, f, (x, n, "x"), (xdot, n, "xdot"), n, out)
+    }
+
+    // ---- derivatives ----
+
+    /// Forward dynamics at (x, xdot, u) and its derivatives (rbss_forward_dynamics_derivatives):
+    /// a dict of "xddot" (n,), "lambda" (m,), "dxddot_dx", "dxddot_dxdot" (n, n), "dxddot_du"
+    /// (n, actuated), "dlambda_dx", "dlambda_dxdot" (m, n), "dlambda_du" (m, actuated); (k, n)
+    /// inputs give each a leading axis k.
+    fn forward_dynamics_derivatives<'py>(
+        &self,
+        py: Python<'py>,
+        x: &Bound<'py, PyAny>,
+        xdot: &Bound<'py, PyAny>,
+        u: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (f, n, m, a) = (
+            self.api.rbss_forward_dynamics_derivatives,
+            self.n,
+            self.m,
+            self.actuated,
+        );
+        let ins = [(x, n, "x"), (xdot, n, "xdot"), (u, a, "u")];
+        let shapes = [
+            (n, None),
+            (m, None),
+            (n, Some(n)),
+            (n, Some(n)),
+            (n, Some(a)),
+            (m, Some(n)),
+            (m, Some(n)),
+            (m, Some(a)),
+        ];
+        // SAFETY: as in `one`: the outputs hold the lengths of rbss.h.
+        let outs = self.shaped_rows(py, &ins, &shapes, |h, c, r| unsafe {
+            f(
+                h,
+                c.input(0, r),
+                c.input(1, r),
+                c.input(2, r),
+                c.output(0, r),
+                c.output(1, r),
+                c.output(2, r),
+                c.output(3, r),
+                c.output(4, r),
+                c.output(5, r),
+                c.output(6, r),
+                c.output(7, r),
+            )
+        })?;
+        let keys = [
+            "xddot",
+            "lambda",
+            "dxddot_dx",
+            "dxddot_dxdot",
+            "dxddot_du",
+            "dlambda_dx",
+            "dlambda_dxdot",
+            "dlambda_du",
+        ];
+        let d = PyDict::new(py);
+        for (k, v) in keys.into_iter().zip(outs) {
+            d.set_item(k, v)?;
+        }
+        Ok(d.into_any())
+    }
+
+    /// (A, B) of d/dt [y; ydot] = A [y; ydot] + B U, forward dynamics linearised on the
+    /// constraint manifold at (x, xdot, u) (rbss_linearize) in the d = n - m independent
+    /// coordinates y: "outputs" (output_index's) or "actuated" (actuated_index's, fully
+    /// actuated robots). A (2d, 2d), B (2d, actuated); (k, n) inputs give (k, 2d, 2d) and
+    /// (k, 2d, actuated). A state off the manifold (max |f(x)| or max |G xdot| above 1e-6) is
+    /// an RbssError with code RBSS_ERR_STATE.
+    #[pyo3(signature = (x, xdot, u, coordinates="outputs"))]
+    fn linearize<'py>(
+        &self,
+        py: Python<'py>,
+        x: &Bound<'py, PyAny>,
+        xdot: &Bound<'py, PyAny>,
+        u: &Bound<'py, PyAny>,
+        coordinates: &str,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let code = match coordinates {
+            "outputs" => RBSS_LINEARIZE_OUTPUTS,
+            "actuated" => RBSS_LINEARIZE_ACTUATED,
+            other => {
+                return Err(PyValueError::new_err(format!(
+                    "coordinates: expected 'outputs' or 'actuated', got '{other}'"
+                )));
+            }
+        };
+        let (f, n, a) = (self.api.rbss_linearize, self.n, self.actuated);
+        let w = 2 * n.saturating_sub(self.m);
+        let ins = [(x, n, "x"), (xdot, n, "xdot"), (u, a, "u")];
+        // SAFETY: as in `one`.
+        let outs = self.shaped_rows(py, &ins, &[(w, Some(w)), (w, Some(a))], |h, c, r| unsafe {
+            f(
+                h,
+                code,
+                c.input(0, r),
+                c.input(1, r),
+                c.input(2, r),
+                c.output(0, r),
+                c.output(1, r),
+            )
+        })?;
+        Ok(PyTuple::new(py, outs)?.into_any())
+    }
+
+    /// One step of h > 0 from the state s = (x, xdot) with u held over it, and its Jacobians
+    /// (rbss_step_derivatives): (x_next, xdot_next, F_x, F_u), F_x = ds'/ds (2n, 2n; s = (X,
+    /// Xdot) in that order), F_u = ds'/dU (2n, actuated). method: "rk4" or
+    /// "semi_implicit_euler"; baumgarte: [alpha, beta] gains on each stage's acceleration
+    /// (default none). (k, n) inputs give each result a leading axis k.
+    #[pyo3(signature = (x, xdot, u, h, method="rk4", baumgarte=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn step_derivatives<'py>(
+        &self,
+        py: Python<'py>,
+        x: &Bound<'py, PyAny>,
+        xdot: &Bound<'py, PyAny>,
+        u: &Bound<'py, PyAny>,
+        h: f64,
+        method: &str,
+        baumgarte: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let code = match method {
+            "rk4" => RBSS_STEP_RK4,
+            "semi_implicit_euler" => RBSS_STEP_SEMI_IMPLICIT_EULER,
+            other => {
+                return Err(PyValueError::new_err(format!(
+                    "method: expected 'rk4' or 'semi_implicit_euler', got '{other}'"
+                )));
+            }
+        };
+        let (f, n, a) = (self.api.rbss_step_derivatives, self.n, self.actuated);
+        let gains = match baumgarte {
+            Some(b) if !b.is_none() => {
+                let g = contiguous(b)?;
+                if g.shape() != [2] {
+                    return Err(PyValueError::new_err(format!(
+                        "baumgarte: expected shape (2,), got {}",
+                        shape_repr(g.shape())
+                    )));
+                }
+                Some(g)
+            }
+            _ => None,
+        };
+        let g: In = gains.as_ref().map_or(std::ptr::null(), |g| g.data() as In);
+        let ins = [(x, n, "x"), (xdot, n, "xdot"), (u, a, "u")];
+        let shapes = [(n, None), (n, None), (2 * n, Some(2 * n)), (2 * n, Some(a))];
+        // SAFETY: as in `one`; `g` is null or 2 values, kept alive by `gains`.
+        let outs = self.shaped_rows(py, &ins, &shapes, |hd, c, r| unsafe {
+            f(
+                hd,
+                code,
+                c.input(0, r),
+                c.input(1, r),
+                c.input(2, r),
+                h,
+                g,
+                c.output(0, r),
+                c.output(1, r),
+                c.output(2, r),
+                c.output(3, r),
+            )
+        })?;
+        Ok(PyTuple::new(py, outs)?.into_any())
     }
 }
 
