@@ -73,9 +73,6 @@ pub struct Cache {
     pub codegen: PathBuf,
     /// Whether to build the generator where `codegen` names it when it is not there.
     pub build_codegen: bool,
-    /// Whether `target` is the command's own build directory: the robot's library then
-    /// depends on the command's library with the command's features, to reuse it compiled.
-    pub reuse_features: bool,
     /// cargo.
     pub cargo: PathBuf,
 }
@@ -96,15 +93,12 @@ impl Cache {
         let own = own_target_dir();
         let target = match std::env::var_os("RBSS_CACHE_TARGET") {
             Some(t) if !t.is_empty() => PathBuf::from(t),
-            // The build directory this command was built in: the runtime and every dependency
-            // are compiled there already (a first run compiles the robot alone, not ~40 crates).
+            // The build directory this command was built in: the ~40 dependencies from
+            // crates.io are compiled there already (the rbss crates are compiled once more: out
+            // of their workspace, cargo hashes them differently), so a first run compiles those
+            // and the robot only.
             _ => own.clone().unwrap_or_else(|| dir.join("target")),
         };
-        // Only by default: a directory named by RBSS_CACHE_TARGET (the tests name their
-        // workspace's, which `cargo test --workspace` compiles with other features) keeps the
-        // small library without the built-in robots.
-        let reuse_features =
-            std::env::var_os("RBSS_CACHE_TARGET").is_none_or(|t| t.is_empty()) && own.is_some();
         let mut build_codegen = false;
         let codegen = match std::env::var_os("RBSS_CODEGEN") {
             Some(c) if !c.is_empty() => PathBuf::from(c),
@@ -134,7 +128,6 @@ impl Cache {
             source: PathBuf::from(SOURCE),
             codegen,
             build_codegen,
-            reuse_features,
             cargo,
         })
     }
@@ -189,36 +182,6 @@ impl Cache {
         ));
         Ok(())
     }
-}
-
-/// The features of the robot library's dependency on the command's library (after
-/// `default-features = false`): with `reuse` (the build directory is the command's own),
-/// exactly the features this command was built with, so that cargo reuses its compiled
-/// library instead of compiling it again; else none (no other built-in robots). The studies
-/// variant adds `studies`.
-fn library_features(reuse: bool, variant: Variant) -> String {
-    let mut f: Vec<&str> = Vec::new();
-    if reuse {
-        for (on, name) in [
-            (cfg!(feature = "default"), "default"),
-            (cfg!(feature = "robots"), "robots"),
-            (cfg!(feature = "all-robots"), "all-robots"),
-            (cfg!(feature = "studies"), "studies"),
-            (cfg!(feature = "full"), "full"),
-        ] {
-            if on {
-                f.push(name);
-            }
-        }
-    }
-    if variant == Variant::Studies && !f.contains(&"studies") {
-        f.push("studies");
-    }
-    if f.is_empty() {
-        return String::new();
-    }
-    let quoted: Vec<String> = f.iter().map(|n| format!("\"{n}\"")).collect();
-    format!(", features = [{}]", quoted.join(", "))
 }
 
 /// The cargo build directory this command runs from, when it was built by cargo from the
@@ -1211,9 +1174,8 @@ fn build_in(
          \n\
          [dependencies]\n\
          {name} = {{ path = \"../robot\" }}\n\
-         # In the command's own build directory, the command's features (its library is\n\
-         # compiled there already); else without the feature `robots`: of the built-in robots\n\
-         # only stewart_6ups (paper, stress) is compiled in, the others' solvers are not.\n\
+         # Without the feature `robots`: of the command's built-in robots only stewart_6ups\n\
+         # (paper, stress) is compiled in, the others' solvers are not (build.rs).\n\
          rbss = {{ path = {root}, default-features = false{features} }}\n\
          rbss-ffi = {{ path = {ffi} }}\n\
          rbss-runtime = {{ path = {runtime} }}\n\
@@ -1227,8 +1189,8 @@ fn build_in(
          [profile.release.package.\"*\"]\n\
          codegen-units = 4\n\
          \n\
-         # The rbss crates are members of the rbss workspace, so its `\"*\"` (4 units) does not\n\
-         # apply to them there: the same here, so cargo reuses what the command's build compiled.\n\
+         # The rbss crates as the rbss workspace compiles them (members: 16 units, not the 4 of\n\
+         # its `\"*\"`; with 4 the 6-UPS's dynamics terms ran 14 % slower, BENCHMARKS.md).\n\
          [profile.release.package.rbss]\n\
          codegen-units = 16\n\
          [profile.release.package.rbss-runtime]\n\
@@ -1247,7 +1209,10 @@ fn build_in(
         root = src(""),
         ffi = src("ffi"),
         runtime = src("runtime"),
-        features = library_features(cache.reuse_features, variant),
+        features = match variant {
+            Variant::Plain => "",
+            Variant::Studies => ", features = [\"studies\"]",
+        },
     );
     let lib_rs = format!(
         "//! Written by rbss --model-file: the robot `{name}` behind the C ABI (rbss.h) and the \
