@@ -18,7 +18,15 @@ const LAYERS: layering::Layers<'static> = &[
     ("the crate root's helpers and macros (lib.rs)", &[""]),
     (
         "output files, plots, the robots and the robot option",
-        &["output", "csv", "plot", "robots", "robot_arg", "kinematics"],
+        &[
+            "output",
+            "csv",
+            "describe",
+            "plot",
+            "robots",
+            "robot_arg",
+            "kinematics",
+        ],
     ),
     ("trajectories", &["trajectory"]),
     ("the paper's study", &["paper"]),

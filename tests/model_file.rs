@@ -136,19 +136,28 @@ fn fresh_cached_stale_and_corrupt_cache() {
     assert!(ok, "{stderr}");
     assert!(!stderr.contains("compiling"), "{stderr}");
     assert!(fk.contains("x        =     0.050000"), "{fk}");
-    // `rbss list --model-file`: the robot's line, as `rbss list` gives the compiled-in one.
-    let (ok, listed, stderr) = rbss(&cache, &["list", "--model-file", model_arg], &[]);
-    assert!(ok, "{stderr}");
-    assert!(!stderr.contains("compiling"), "{stderr}");
-    let (ok, all, stderr) = rbss(&cache, &["list"], &[]);
-    assert!(ok, "{stderr}");
-    let words = |l: &str| l.split_whitespace().collect::<Vec<_>>().join(" ");
-    let builtin = all
-        .lines()
-        .find(|l| l.starts_with("five_bar "))
-        .expect("five_bar in rbss list");
-    assert_eq!(listed.lines().count(), 1, "{listed}");
-    assert_eq!(words(&listed), words(builtin));
+    // `rbss list --model-file`: the robot's description, as `rbss list --model` gives the
+    // compiled-in one (text and JSON).
+    for json in [false, true] {
+        let flag: &[&str] = if json { &["--json"] } else { &[] };
+        let (ok, listed, stderr) = rbss(
+            &cache,
+            &[&["list", "--model-file", model_arg], flag].concat(),
+            &[],
+        );
+        assert!(ok, "{stderr}");
+        assert!(!stderr.contains("compiling"), "{stderr}");
+        let (ok, builtin, stderr) = rbss(
+            &cache,
+            &[&["list", "--model", "five_bar"], flag].concat(),
+            &[],
+        );
+        assert!(ok, "{stderr}");
+        assert_eq!(listed, builtin);
+    }
+    let (ok, listed, _) = rbss(&cache, &["list", "--model-file", model_arg], &[]);
+    assert!(ok);
+    assert!(listed.contains("left: 0 x, 1 y"), "{listed}");
 
     // `rbss linearize --model-file` (issue 36): through the library, the JSON of the
     // compiled-in robot (A, B, the full derivatives), in both coordinates; a state off the

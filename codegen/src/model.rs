@@ -50,7 +50,7 @@ pub struct Import {
     /// The length of the model file's own text at the start of `text`.
     pub model_len: usize,
     /// Where `text`'s imported lines come from: the source's elements.
-    pub map: crate::import::merge::SourceMap,
+    pub map: crate::source::SourceMap,
 }
 
 /// A named parameter.

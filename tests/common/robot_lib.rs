@@ -63,7 +63,7 @@ impl RobotLib {
             let version = lib
                 .get::<unsafe extern "C" fn() -> u32>(b"rbss_abi_version")
                 .unwrap()();
-            assert_eq!(version, 2, "C ABI version");
+            assert_eq!(version, rbss_ffi::ABI_VERSION, "C ABI version");
             let h = lib
                 .get::<unsafe extern "C" fn() -> Handle>(b"rbss_new")
                 .unwrap()();

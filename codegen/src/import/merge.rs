@@ -19,7 +19,8 @@ use toml::Spanned;
 use toml::de::{DeArray, DeTable, DeValue};
 
 use super::{Format, Imported, Renames, SourceFile, ident, import_renamed};
-use crate::diagnostics::{Diagnostic, Diagnostics, Elsewhere, Place, Pos};
+use crate::diagnostics::{Diagnostic, Diagnostics, Place};
+pub use crate::source::SourceMap;
 
 type Value<'a> = Spanned<DeValue<'a>>;
 
@@ -34,126 +35,6 @@ pub struct Resolved {
     pub warnings: Vec<Diagnostic>,
     /// Where the merged text's lines come from.
     pub map: SourceMap,
-}
-
-/// Where the lines of a merged text come from: the model file's own lines are its first ones;
-/// each line of the imported model comes from an element of the source (a `[[body]]`'s
-/// `inertia` from the link's `<inertia>`, a coordinate from its `<joint>`), or, for the lines no
-/// element gave (the header, `coordinates = [`), from the model file's source key.
-#[derive(Debug, Clone, Default)]
-pub struct SourceMap {
-    /// The model file's length in bytes: its text is the merged text's start.
-    pub model_len: usize,
-    /// The merged text's line (1-based) of the imported model's first line.
-    first_line: usize,
-    /// Each imported line: its text (its comment cut) and its place in the source.
-    lines: Vec<(String, Option<Place>)>,
-    /// The model file's source key's value (`"arm.urdf"`): its position and length.
-    key: (Pos, usize),
-}
-
-impl SourceMap {
-    /// `d` (positions in the merged text) with every position in the imported model moved to
-    /// the source's element it comes from (the imported line as a note), "(line N)" in its
-    /// texts the same, and the model file's own text to quote.
-    pub fn relocate(&self, d: Diagnostics, merged: &str) -> Diagnostics {
-        let model = merged.get(..self.model_len).unwrap_or(merged).to_string();
-        let items = d
-            .items
-            .into_iter()
-            .map(|mut item| {
-                if item.elsewhere.is_none()
-                    && let Some((text, place)) = self.imported(item.pos.line)
-                {
-                    let note = format!("imported as `{}`", short(text));
-                    match place {
-                        Some(p) => {
-                            item.pos = p.pos;
-                            item.len = p.len;
-                            item.elsewhere = Some(Box::new(Elsewhere {
-                                path: p.path.clone(),
-                                line: p.line.clone(),
-                                note: Some(note),
-                            }));
-                        }
-                        None => {
-                            item.pos = self.key.0;
-                            item.len = self.key.1;
-                            item.label = "in the model imported from this file".into();
-                            item.help = Some(match item.help.take() {
-                                Some(h) => format!("{note}; {h}"),
-                                None => note,
-                            });
-                        }
-                    }
-                }
-                item.message = self.lines_named(&item.message);
-                item.label = self.lines_named(&item.label);
-                item.help = item.help.map(|h| self.lines_named(&h));
-                item
-            })
-            .collect();
-        Diagnostics::new(d.path, model, items)
-    }
-
-    /// The imported line at `line` of the merged text, if it is one.
-    fn imported(&self, line: usize) -> Option<&(String, Option<Place>)> {
-        line.checked_sub(self.first_line)
-            .and_then(|k| self.lines.get(k))
-    }
-
-    /// `s` with every "line N" of an imported line as "FILE:LINE" of its source ("on line N"
-    /// as "at FILE:LINE").
-    fn lines_named(&self, s: &str) -> String {
-        let mut out = String::new();
-        let mut rest = s;
-        while let Some(i) = rest.find("line ") {
-            let word = i == 0 || rest[..i].ends_with([' ', '(']);
-            let after = &rest[i + 5..];
-            let digits = after.bytes().take_while(u8::is_ascii_digit).count();
-            let place = after[..digits]
-                .parse::<usize>()
-                .ok()
-                .filter(|_| word && !after[digits..].starts_with(|c: char| c.is_alphanumeric()))
-                .and_then(|n| self.imported(n))
-                .and_then(|(_, p)| p.as_ref());
-            match place {
-                Some(p) => {
-                    let head = &rest[..i];
-                    match head.strip_suffix("on ") {
-                        Some(h) => {
-                            out.push_str(h);
-                            out.push_str("at ");
-                        }
-                        None => out.push_str(head),
-                    }
-                    out.push_str(&format!("{}:{}", p.path, p.pos.line));
-                    rest = &after[digits..];
-                }
-                None => {
-                    out.push_str(&rest[..i + 5]);
-                    rest = after;
-                }
-            }
-        }
-        out.push_str(rest);
-        out
-    }
-}
-
-/// An imported line as a note shows it: without its comment, at most 120 characters.
-fn short(line: &str) -> String {
-    let line = match line.find("  # <") {
-        Some(i) => &line[..i],
-        None => line,
-    };
-    let line = line.trim();
-    if line.chars().count() > 120 {
-        let cut: String = line.chars().take(117).collect();
-        format!("{cut}...")
-    } else {
-        line.to_string()
-    }
 }
 
 /// The model file's source key (`urdf`, `mjcf`, `sdf`), if it has one: the format, the path as
