@@ -11,6 +11,10 @@
 //! bias: `rbss fd`'s accelerations must solve `M q̈ = u - bias` (no finite differences, so to
 //! 1e-9), `rbss fk` must give the tool's pose and `rbss ik` joints whose tool is at the pose.
 
+// The oracle is dense linear algebra (a Gaussian elimination, M by columns): index loops read
+// as the formulas.
+#![allow(clippy::needless_range_loop)]
+
 use std::path::Path;
 use std::process::Command;
 
