@@ -645,11 +645,7 @@ pub fn run(cli: Cli, stdout: &mut String) -> Result<(), String> {
             let mut all = Vec::new();
             for name in robots::NAMES {
                 with_robot!(*name, |model| {
-                    let one = crate::describe::describe(&model, true)?;
-                    all.push(
-                        serde_json::from_str::<serde_json::Value>(&one)
-                            .map_err(|e| e.to_string())?,
-                    );
+                    all.push(crate::describe::describe_json(&model));
                     Ok::<(), String>(())
                 })?;
             }

@@ -11,52 +11,12 @@ pub fn describe<K: Dynamics<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     json: bool,
 ) -> Result<String, String> {
-    let s = model.structure();
-    let roles = |j: usize| {
-        let mut r = Vec::new();
-        if s.actuated.contains(&j) {
-            r.push("actuated");
-        }
-        if s.outputs.contains(&j) {
-            r.push("output");
-        }
-        if s.passive.contains(&j) && !s.outputs.contains(&j) {
-            r.push("passive");
-        }
-        r
-    };
-    let loops = constraint_loops(s.constraints);
     if json {
-        let named = |idx: &[usize]| -> Vec<Value> {
-            idx.iter()
-                .map(|&j| json!({ "name": s.coordinates[j], "index": j }))
-                .collect()
-        };
-        let out = json!({
-            "name": s.name,
-            "coordinates": s.coordinates.iter().enumerate().map(|(j, c)| json!({
-                "index": j,
-                "name": c,
-                "roles": roles(j),
-                "home": s.home.get(j),
-            })).collect::<Vec<_>>(),
-            "constraints": s.constraints.iter().enumerate().map(|(i, c)| {
-                let (lp, component) = split_constraint(c);
-                json!({ "index": i, "name": c, "loop": lp, "component": component })
-            }).collect::<Vec<_>>(),
-            "loops": loops.iter().map(|(lp, rows)| json!({ "name": lp, "rows": rows }))
-                .collect::<Vec<_>>(),
-            "actuated": s.actuated.iter().enumerate().map(|(i, &j)| json!({
-                "name": s.coordinates[j],
-                "index": j,
-                "gear": rbss_runtime::gear_ratio(s.gear, i),
-            })).collect::<Vec<_>>(),
-            "outputs": named(s.outputs),
-            "passive": named(s.passive),
-            "degrees_of_freedom": N.saturating_sub(M),
-        });
-        return serde_json::to_string_pretty(&out).map_err(|e| format!("cannot write JSON: {e}"));
+        return serde_json::to_string_pretty(&describe_json(model))
+            .map_err(|e| format!("cannot write JSON: {e}"));
     }
+    let s = model.structure();
+    let loops = constraint_loops(s.constraints);
     let mut t = String::new();
     let w = s.coordinates.iter().map(|c| c.len()).max().unwrap_or(0);
     t.push_str(&format!(
@@ -72,7 +32,7 @@ pub fn describe<K: Dynamics<N, M>, const N: usize, const M: usize>(
             .map_or(String::new(), |h| format!("{h:>12.6}"));
         t.push_str(&format!(
             "  {j:>3}  {c:<w$}  {home}  {}\n",
-            roles(j).join(", ")
+            roles(s, j).join(", ")
         ));
     }
     if loops.is_empty() {
@@ -100,6 +60,57 @@ pub fn describe<K: Dynamics<N, M>, const N: usize, const M: usize>(
     t.push_str(&format!("actuated q: {}\n", list(s.actuated)));
     t.push_str(&format!("outputs y: {}\n", list(s.outputs)));
     Ok(t.trim_end().to_string())
+}
+
+/// The roles of coordinate `j`: actuated, output, passive (a passive output is an output).
+fn roles(s: &rbss_runtime::Structure, j: usize) -> Vec<&'static str> {
+    let mut r = Vec::new();
+    if s.actuated.contains(&j) {
+        r.push("actuated");
+    }
+    if s.outputs.contains(&j) {
+        r.push("output");
+    }
+    if s.passive.contains(&j) && !s.outputs.contains(&j) {
+        r.push("passive");
+    }
+    r
+}
+
+/// The description of `model` as JSON (what `rbss list --json` prints).
+pub fn describe_json<K: Dynamics<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+) -> Value {
+    let s = model.structure();
+    let loops = constraint_loops(s.constraints);
+    let named = |idx: &[usize]| -> Vec<Value> {
+        idx.iter()
+            .map(|&j| json!({ "name": s.coordinates[j], "index": j }))
+            .collect()
+    };
+    json!({
+        "name": s.name,
+        "coordinates": s.coordinates.iter().enumerate().map(|(j, c)| json!({
+            "index": j,
+            "name": c,
+            "roles": roles(s, j),
+            "home": s.home.get(j),
+        })).collect::<Vec<_>>(),
+        "constraints": s.constraints.iter().enumerate().map(|(i, c)| {
+            let (lp, component) = split_constraint(c);
+            json!({ "index": i, "name": c, "loop": lp, "component": component })
+        }).collect::<Vec<_>>(),
+        "loops": loops.iter().map(|(lp, rows)| json!({ "name": lp, "rows": rows }))
+            .collect::<Vec<_>>(),
+        "actuated": s.actuated.iter().enumerate().map(|(i, &j)| json!({
+            "name": s.coordinates[j],
+            "index": j,
+            "gear": rbss_runtime::gear_ratio(s.gear, i),
+        })).collect::<Vec<_>>(),
+        "outputs": named(s.outputs),
+        "passive": named(s.passive),
+        "degrees_of_freedom": N.saturating_sub(M),
+    })
 }
 
 /// A constraint's loop and component: `leg1.x` is component `x` of loop `leg1`; a name without
