@@ -541,6 +541,31 @@ fn renames_from_the_model_file() {
     );
     derived(&model);
 
+    // A rename onto a name the source already has (the joint `j2`; the link `fore-arm`, kept as
+    // `fore_arm`): at the `[rename]` entries of the model file, not as a duplicate in the source.
+    std::fs::write(
+        &model_file,
+        "urdf = \"arm.urdf\"\n[rename]\njoints = { type = \"j2\" }\nbodies = { static = \"fore_arm\" }\n",
+    )
+    .unwrap();
+    let shown = model_file.display().to_string();
+    let err = parse_model(&shown, &std::fs::read_to_string(&model_file).unwrap()).unwrap_err();
+    let report = err.render();
+    assert_eq!(err.items.len(), 2, "{report}");
+    assert!(
+        report.contains("arm.toml:3:12")
+            && report.contains("joint `type` cannot be renamed `j2`: ")
+            && report.contains("arm.urdf's joint `j2` has that name"),
+        "{report}"
+    );
+    assert!(
+        report.contains("arm.toml:4:12")
+            && report.contains("body `static` cannot be renamed `fore_arm`: ")
+            && report.contains("body `fore-arm` has that name")
+            && report.contains("or rename `fore-arm` too"),
+        "{report}"
+    );
+
     // An error about a renamed joint (it mimics itself): at its `<mimic>` in the URDF, under
     // its new name, not at a line of the merged text.
     let urdf = std::fs::read_to_string(dir.path().join("arm.urdf")).unwrap();

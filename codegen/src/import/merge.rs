@@ -82,41 +82,20 @@ pub fn resolve(
         ));
     }
     let (mut renames, spans) = renames_of(model_path, source, root)?;
-    let (imported, warnings) = import_renamed(&path, &shown, format, &mut renames)?;
-    // A rename of a name the source does not have.
-    let mut unknown = Vec::new();
-    for ((kind, list, seen), spans) in [
-        ("joint", &renames.joints, &renames.seen_joints),
-        ("body", &renames.bodies, &renames.seen_bodies),
-    ]
-    .into_iter()
-    .zip(&spans)
-    {
-        for ((from, _), span) in list.iter().zip(spans) {
-            if seen.contains(from) {
-                continue;
-            }
-            let d = model_diag(format!("{shown} has no {kind} `{from}`"), "not renamed")
-                .items
-                .remove(0);
-            let mut d = Diagnostic {
-                pos: crate::source::pos_of(source, span.start),
-                len: source.get(span.clone()).map_or(1, |s| s.chars().count()),
-                ..d
-            };
-            d.help = crate::diagnostics::suggest(from, seen.iter().map(|s| (s.as_str(), None)))
-                .or_else(|| {
-                    (!seen.is_empty()).then(|| {
-                        let names: Vec<&str> = seen.iter().take(12).map(String::as_str).collect();
-                        format!("its {kind} names: {}", names.join(", "))
-                    })
-                });
-            unknown.push(d);
-        }
+    let imported = import_renamed(&path, &shown, format, &mut renames);
+    // The renames' own mistakes, at their entries in the model file, before the source's errors
+    // (a rename onto a name the source already uses would otherwise surface as a duplicate there);
+    // names the source lacks only when it imported (else its names may be incomplete).
+    let mistakes = rename_mistakes(&renames, &spans, &shown, imported.is_ok(), |span| {
+        (
+            crate::source::pos_of(source, span.start),
+            source.get(span.clone()).map_or(1, |s| s.chars().count()),
+        )
+    });
+    if !mistakes.is_empty() {
+        return Err(Diagnostics::new(model_path, source, mistakes));
     }
-    if !unknown.is_empty() {
-        return Err(Diagnostics::new(model_path, source, unknown));
-    }
+    let (imported, warnings) = imported?;
     let (text, start, lines) = combined(source, &imported);
     let map = SourceMap {
         model_len: source.len(),
@@ -151,6 +130,71 @@ pub fn resolve(
         warnings,
         map,
     })
+}
+
+/// What is wrong with the model file's renames once the source's names are known: a name the
+/// source does not have (with the nearest names as help; only when `complete`, the source's
+/// names all read), and a new name another joint (body) of the source already has: each at its
+/// `[rename]` entry (`at` gives the position and length of an entry's span).
+fn rename_mistakes(
+    renames: &Renames,
+    spans: &[Vec<std::ops::Range<usize>>; 2],
+    shown: &str,
+    complete: bool,
+    at: impl Fn(&std::ops::Range<usize>) -> (crate::diagnostics::Pos, usize),
+) -> Vec<Diagnostic> {
+    let mut out = Vec::new();
+    for ((kind, list, seen), spans) in [
+        ("joint", &renames.joints, &renames.seen_joints),
+        ("body", &renames.bodies, &renames.seen_bodies),
+    ]
+    .into_iter()
+    .zip(spans)
+    {
+        for ((from, to), span) in list.iter().zip(spans) {
+            let (pos, len) = at(span);
+            if !seen.contains(from) {
+                if !complete {
+                    continue;
+                }
+                let mut d = Diagnostic::new(
+                    pos,
+                    len,
+                    format!("{shown} has no {kind} `{from}`"),
+                    "not renamed",
+                );
+                d.help = crate::diagnostics::suggest(from, seen.iter().map(|s| (s.as_str(), None)))
+                    .or_else(|| {
+                        (!seen.is_empty()).then(|| {
+                            let names: Vec<&str> =
+                                seen.iter().take(12).map(String::as_str).collect();
+                            format!("its {kind} names: {}", names.join(", "))
+                        })
+                    });
+                out.push(d);
+                continue;
+            }
+            // Another of the source's names that ends up as `to` (kept, or mapped to it).
+            let taken = seen
+                .iter()
+                .find(|s| *s != from && !list.iter().any(|(f, _)| f == *s) && ident(s) == *to);
+            if let Some(other) = taken {
+                let mut d = Diagnostic::new(
+                    pos,
+                    len,
+                    format!(
+                        "{kind} `{from}` cannot be renamed `{to}`: {shown}'s {kind} `{other}` has that name"
+                    ),
+                    "a name already taken",
+                );
+                d.help = Some(format!(
+                    "choose another name, or rename `{other}` too (`{other} = \"...\"`)"
+                ));
+                out.push(d);
+            }
+        }
+    }
+    out
 }
 
 /// The model file's `[rename]`: `joints = { SOURCE_NAME = "new_name" }` and `bodies = {...}`
