@@ -89,8 +89,9 @@ pub use algorithm::{
     project_velocity, state_residual,
 };
 pub use algorithm::{
-    Coordinates, Linearization, StepDerivatives, linearize, rk4_step_derivatives,
-    semi_implicit_euler_step, semi_implicit_euler_step_derivatives,
+    Coordinates, Linearization, StepDerivatives, StepProjection, linearize,
+    project_step_derivatives, rk4_step_derivatives, semi_implicit_euler_step,
+    semi_implicit_euler_step_derivatives,
 };
 pub use algorithm::{
     IdDerivativesSolver, InverseDynamicsDerivatives, inverse_dynamics_derivatives,

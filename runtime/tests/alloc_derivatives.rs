@@ -2,12 +2,13 @@
 //! and one warm-up call, `forward_dynamics_derivatives` allocates zero times, on the generated
 //! 6-UPS (by the elimination and by the dense fallback) and on the UR5 (a massless frame), also
 //! when it fails; `linearize` and `state_space` on the 6-UPS, in both coordinates; the
-//! RK4 and semi-implicit Euler steps' Jacobians. Same counting global allocator as `alloc.rs`; one `#[test]` per binary.
+//! RK4 and semi-implicit Euler steps' Jacobians, and the projected step's. Same counting global allocator as `alloc.rs`; one `#[test]` per binary.
 
 use rbss_runtime::{
     Coordinates, Data, DerivativesSolver, ForwardDynamicsDerivatives, Linearization, Model,
     StepDerivatives, forward_dynamics_derivatives, forward_dynamics_derivatives_with, linearize,
-    rk4_step_derivatives, semi_implicit_euler_step, semi_implicit_euler_step_derivatives,
+    project_step_derivatives, rk4_step_derivatives, semi_implicit_euler_step,
+    semi_implicit_euler_step_derivatives,
 };
 
 #[path = "common/counting.rs"]
@@ -72,6 +73,8 @@ fn forward_dynamics_derivatives_do_not_allocate() {
     let x0 = data.x;
     let (n, r) = allocations(|| {
         rk4_step_derivatives(&model, &mut data, &mut st, &u, 1e-3, b)?;
+        data.x = x0;
+        project_step_derivatives(&model, &mut data, &mut st)?;
         data.x = x0;
         semi_implicit_euler_step_derivatives(&model, &mut data, &mut st, &u, 1e-3, b)?;
         data.x = x0;

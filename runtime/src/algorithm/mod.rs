@@ -75,6 +75,7 @@ pub(crate) mod reach;
 pub(crate) mod reduced;
 mod report;
 pub mod step;
+pub mod step_projection;
 pub(crate) mod terms;
 
 pub use baumgarte::Baumgarte;
@@ -102,3 +103,4 @@ pub use step::{
     StepDerivatives, rk4_step_derivatives, semi_implicit_euler_step,
     semi_implicit_euler_step_derivatives,
 };
+pub use step_projection::{StepProjection, project_step_derivatives};

@@ -40,6 +40,32 @@ pub fn project_position<K: Constraints<N, M> + Jacobian<N, M>, const N: usize, c
     model: &Model<K, N, M>,
     data: &mut Data<N, M>,
 ) -> Result<SolveReport, SolverError> {
+    project_position_with(model, data, &mut |_| {})
+}
+
+/// One Gauss–Newton step of [`project_position_with`], for a caller that differentiates the
+/// projection (`step_projection.rs`): the iterate `X_k`, the pivoted QR of `G(X_k)ᵀ` (`qr`,
+/// `tau`, `piv`, as `factor_qr` writes them), `R⁻ᵀ Pᵀ f(X_k)` and the step
+/// `G⁺ f = Q₁ R⁻ᵀ Pᵀ f` about to be subtracted.
+pub(crate) struct GaussNewtonStep<'a, const N: usize> {
+    pub x: &'a [f64; N],
+    pub qr: &'a [f64],
+    pub tau: &'a [f64],
+    pub piv: &'a [usize],
+    pub rt_f: &'a [f64],
+    pub step: &'a [f64; N],
+}
+
+/// [`project_position`], calling `on_step` before each step is taken.
+pub(crate) fn project_position_with<
+    K: Constraints<N, M> + Jacobian<N, M>,
+    const N: usize,
+    const M: usize,
+>(
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
+    on_step: &mut dyn FnMut(&GaussNewtonStep<'_, N>),
+) -> Result<SolveReport, SolverError> {
     let o = model.options;
     let k = model.kernels();
     check_finite("data.x", &data.x)?;
@@ -82,7 +108,17 @@ pub fn project_position<K: Constraints<N, M> + Jacobian<N, M>, const N: usize, c
             let v = f[piv[k]] - linalg::dot4(col, &step[..k]);
             step[k] = v / qr[k + k * N];
         }
+        let mut rt_f = [0.0; M];
+        rt_f.copy_from_slice(&step[..M]);
         linalg::apply_q(qr, N, &work[0], M, &mut step, false);
+        on_step(&GaussNewtonStep {
+            x,
+            qr,
+            tau: &work[0],
+            piv: &piv[..],
+            rt_f: &rt_f,
+            step: &step,
+        });
         for (xj, &sj) in x.iter_mut().zip(&step) {
             *xj -= sj;
         }
@@ -167,7 +203,7 @@ pub fn state_residual<K: Constraints<N, M> + Jacobian<N, M>, const N: usize, con
 /// the reflectors' factors into `work[0]`, the permutation into `piv`; returns
 /// `|r_00| / |r_(M-1)(M-1)|`. `Singular` when the numerical rank is below M or that ratio
 /// exceeds `cond_max`; `NonFinite` for a NaN/inf in `G`.
-fn factor_qr<const N: usize, const M: usize>(
+pub(super) fn factor_qr<const N: usize, const M: usize>(
     g: &nalgebra::SMatrix<f64, M, N>,
     qr: &mut [[f64; N]; M],
     piv: &mut [usize; M],
