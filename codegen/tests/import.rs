@@ -229,6 +229,91 @@ fn mjcf_actuator_gear_is_the_coordinate_gear() {
     assert_eq!(plain.coordinates[th1].gear, None, "gear=\"1\" is no gear");
 }
 
+/// MJCF's joint `ref` (the joint's value at the body's pose as written, MuJoCo's `qpos0`): the
+/// model with `ref` at `X` has the kernels of the same model without it at `X - ref`, and its
+/// coordinates' homes are the `ref`s. On the four-bar (a hinge with `ref` in degrees inside a
+/// `connect` loop, whose anchor is found at `qpos0`) and on an open chain with a slide and a
+/// hinge about a general axis (the steps written out as expressions).
+#[test]
+fn mjcf_joint_ref_shifts_the_coordinate() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let overlay = "mjcf = \"SRC\"\n[robot]\nname = \"r\"\noutputs = [\"th3\"]\n\
+                   [[loop]]\nname = \"pin\"\ncomponents = [\"x\", \"y\"]\n";
+    let xml = std::fs::read_to_string(here().join("four_bar.xml")).unwrap();
+    let with_ref = xml.replacen(
+        "<joint name=\"th2\" axis=\"0 0 1\"/>",
+        "<joint name=\"th2\" axis=\"0 0 1\" ref=\"20\"/>",
+        1,
+    );
+    assert_ne!(with_ref, xml, "four_bar.xml's th2");
+    std::fs::write(d.join("plain.xml"), &xml).unwrap();
+    std::fs::write(d.join("ref.xml"), &with_ref).unwrap();
+    std::fs::write(d.join("plain.toml"), overlay.replace("SRC", "plain.xml")).unwrap();
+    std::fs::write(d.join("ref.toml"), overlay.replace("SRC", "ref.xml")).unwrap();
+    let r20 = 20f64.to_radians();
+    let shifted = model_at(&d.join("ref.toml"));
+    let plain = model_at(&d.join("plain.toml"));
+    let homes: Vec<f64> = shifted.coordinates.iter().map(|c| c.home).collect();
+    assert!(
+        (homes[1] - r20).abs() < 1e-15 && homes[0] == 0.0 && homes[2] == 0.0,
+        "{homes:?}"
+    );
+    let worst = shifted_difference(&shifted, &plain, &[0.0, r20, 0.0]);
+    assert!(worst < 1e-13, "four-bar with ref: {worst:e}");
+
+    let chain = |refs: [&str; 2]| {
+        format!(
+            "<mujoco model=\"c\"><worldbody><body name=\"a\" pos=\"0.1 0 0\">\
+             <joint name=\"s\" type=\"slide\" axis=\"0 -1 0\"{}/>\
+             <inertial pos=\"0 0 0.1\" mass=\"2\" diaginertia=\"0.1 0.2 0.3\"/>\
+             <body name=\"b\" pos=\"0 0.2 0\"><joint name=\"h\" axis=\"1 1 0\" pos=\"0 0 0.1\"{}/>\
+             <inertial pos=\"0.1 0 0\" mass=\"1\" diaginertia=\"0.01 0.02 0.03\"/></body>\
+             </body></worldbody></mujoco>",
+            refs[0], refs[1]
+        )
+    };
+    std::fs::write(d.join("c_plain.xml"), chain(["", ""])).unwrap();
+    std::fs::write(
+        d.join("c_ref.xml"),
+        chain([" ref=\"0.15\"", " ref=\"-35\""]),
+    )
+    .unwrap();
+    std::fs::write(d.join("c_plain.toml"), "mjcf = \"c_plain.xml\"\n").unwrap();
+    std::fs::write(d.join("c_ref.toml"), "mjcf = \"c_ref.xml\"\n").unwrap();
+    let shifted = model_at(&d.join("c_ref.toml"));
+    let plain = model_at(&d.join("c_plain.toml"));
+    let r35 = (-35f64).to_radians();
+    let homes: Vec<f64> = shifted.coordinates.iter().map(|c| c.home).collect();
+    assert!(
+        (homes[0] - 0.15).abs() < 1e-15 && (homes[1] - r35).abs() < 1e-15,
+        "{homes:?}"
+    );
+    let worst = shifted_difference(&shifted, &plain, &[0.15, r35]);
+    assert!(worst < 1e-13, "chain with refs: {worst:e}");
+}
+
+/// The largest difference `|a - b| / (1 + |a|)` of the kernels (f, G, gamma, M, psi) of `a` at
+/// `X` and of `b` at `X - shift` (the same coordinates in the same order), at 16 random states.
+fn shifted_difference(a: &Model, b: &Model, shift: &[f64]) -> f64 {
+    let (da, db) = (derived(a), derived(b));
+    let pa: Vec<f64> = a.parameters.iter().map(|q| q.value).collect();
+    let pb: Vec<f64> = b.parameters.iter().map(|q| q.value).collect();
+    let mut seed = 0x2545_f491_4f6c_dd1du64;
+    let mut worst = 0.0f64;
+    for _ in 0..16 {
+        let x: Vec<f64> = shift.iter().map(|_| 3.0 * random(&mut seed)).collect();
+        let v: Vec<f64> = shift.iter().map(|_| 2.0 * random(&mut seed)).collect();
+        let xb: Vec<f64> = x.iter().zip(shift).map(|(x, s)| x - s).collect();
+        let (ka, kb) = (kernels(&da, &pa, &x, &v), kernels(&db, &pb, &xb, &v));
+        assert_eq!(ka.len(), kb.len());
+        for (u, w) in ka.iter().zip(&kb) {
+            worst = worst.max((u - w).abs() / (1.0 + u.abs()));
+        }
+    }
+    worst
+}
+
 /// A copy of the UR5 model and its URDF in a temporary directory.
 fn ur5_copy(dir: &Path, urdf: &str) -> String {
     let overlay = std::fs::read_to_string(here().join("ur5.toml")).unwrap();

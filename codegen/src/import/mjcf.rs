@@ -7,6 +7,7 @@
 //! | `<joint type="ball">` | three coordinates `NAME_x`, `NAME_y`, `NAME_z` (a spherical joint, `Rx Ry Rz`) |
 //! | `<joint type="free">`, `<freejoint>` (a body of `<worldbody>`) | a free joint: 7 coordinates `NAME_x`, `_y`, `_z`, `NAME_qw`, `_qx`, `_qy`, `_qz` (MuJoCo's `qpos`: world position, quaternion), their homes the body's `pos` and orientation; the body's steps are the free joint only |
 //! | joint `stiffness`, `springref`, `damping`, `armature` | `stiffness`, `rest`, `damping`, `armature` |
+//! | joint `ref` (hinge, slide) | the steps move by `q - ref` and the coordinate's home is `ref` (MuJoCo's `qpos0`: the body as written) |
 //! | `<inertial pos quat mass diaginertia\|fullinertia>` | `mass`, `com`, `inertia` (in the body's axes) |
 //! | `<geom>` (no `<inertial>`, `<compiler inertiafromgeom>`) | the mass and inertia of the body's spheres, capsules, cylinders, boxes, ellipsoids (`density` 1000 or `mass`), as MuJoCo's compiler computes them |
 //! | `<default class>`, `class`, `childclass` | attribute defaults of joints, geoms and actuators |
@@ -762,16 +763,24 @@ fn joint<'a, 'i>(
     if let Some((t, v)) = num(cx, ctx, "armature") {
         c.armature = Some(number(&t, v));
     }
-    if let Some((_, v)) = num(cx, ctx, "ref")
+    // `ref`: the joint's value at the body's pose as written (MuJoCo's qpos0), so the steps
+    // move by `q - ref` and the coordinate's home is `ref` (slide and hinge joints only).
+    let mut q_expr = name.clone();
+    if let Some((t, v)) = num(cx, ctx, "ref")
         && v != 0.0
+        && matches!(kind, "hinge" | "slide")
     {
-        let n = lookup(cx, ctx, j, class, "ref").unwrap_or(j);
-        cx.error(
-            &cx.attr_range(n, "ref"),
-            "a joint `ref` other than 0 is not supported",
-            "",
-            "the coordinate is the joint's angle from the body's pose as written",
-        );
+        let r = if kind == "hinge" {
+            angle(ctx, &t, v)
+        } else {
+            number(&t, v)
+        };
+        q_expr = format!("{name} - {r}");
+        c.home = Some(if kind == "hinge" && ctx.degree {
+            quote(&r)
+        } else {
+            r
+        });
     }
     let anchor = vec3(cx, ctx, "pos").filter(|p| p.iter().any(|x| *x != 0.0));
     let anchor_text = anchor.map(|p| p.map(fnum).join(", "));
@@ -819,7 +828,7 @@ fn joint<'a, 'i>(
             } else {
                 "revolute"
             };
-            transforms.extend(joint_steps(k, &name, axis));
+            transforms.extend(joint_steps(k, &q_expr, axis));
             out.coordinates.push(c);
             vec![name.clone()]
         }

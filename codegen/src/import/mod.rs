@@ -509,11 +509,27 @@ pub(crate) fn sha256_hex(bytes: &[u8]) -> String {
 
 /// The steps of a joint of `kind` (`"revolute"` or `"prismatic"`) moving coordinate `q` along
 /// the unit axis `axis` of the frame reached so far: the named joint about a coordinate axis,
-/// else a turn taking z onto the axis, the joint about z, and that turn undone.
+/// else a turn taking z onto the axis, the joint about z, and that turn undone. `q` may also be
+/// an expression of a coordinate (MJCF's `ref`: `"q - 0.5"`), written as elementary steps.
 pub(crate) fn joint_steps(kind: &str, q: &str, axis: [f64; 3]) -> Vec<String> {
     let (rot, tr) = ("R", "T");
     let letter = if kind == "revolute" { rot } else { tr };
+    let named = ident(q) == q;
     match geom::coordinate_axis(axis) {
+        Some((k, s)) if !named => {
+            let a = ["x", "y", "z"][k];
+            let sign = if s > 0.0 { "" } else { "-" };
+            vec![quote(&format!("{letter}{a}({sign}({q}))"))]
+        }
+        None if !named => {
+            let t = geom::z_onto(axis);
+            let aa = format!("{{ axis_angle = [{}] }}", t.map(fnum).join(", "));
+            vec![
+                aa.clone(),
+                quote(&format!("{letter}z({q})")),
+                format!("{{ inverse = [{aa}] }}"),
+            ]
+        }
         Some((k, s)) => {
             let a = ["x", "y", "z"][k];
             if s > 0.0 {
