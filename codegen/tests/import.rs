@@ -293,6 +293,93 @@ fn mjcf_joint_ref_shifts_the_coordinate() {
     assert!(worst < 1e-13, "chain with refs: {worst:e}");
 }
 
+/// URDF `planar` joints (were refused): three coordinates `NAME_x`, `NAME_y`, `NAME_theta`, not
+/// actuated. With the axis z, the kernels of a cart-and-pole are those of the same robot written
+/// by hand in TOML (`Tx Ty Rz` after the joint's origin); about a general axis `(1, 1, 0)/√2`, a
+/// lone body (centre of mass at the joint, inertia `diag(0.1, 0.2, 0.3)`) has the mass matrix
+/// `diag(m, m, aᵀ I a)` at every state: the two translations orthonormal and normal to the axis,
+/// the rotation about it.
+#[test]
+fn urdf_planar_joints_are_three_coordinates() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let inertial = |m: f64, xyz: &str, i: [f64; 3]| {
+        format!(
+            "<inertial><origin xyz=\"{xyz}\"/><mass value=\"{m}\"/>\
+             <inertia ixx=\"{}\" iyy=\"{}\" izz=\"{}\" ixy=\"0\" ixz=\"0\" iyz=\"0\"/></inertial>",
+            i[0], i[1], i[2]
+        )
+    };
+    std::fs::write(
+        d.join("cart.urdf"),
+        format!(
+            "<robot name=\"cart\"><link name=\"ground\"/>\
+             <link name=\"cart\">{}</link><link name=\"pole\">{}</link>\
+             <joint name=\"base\" type=\"planar\"><origin xyz=\"0 0 0.5\"/><parent link=\"ground\"/>\
+             <child link=\"cart\"/><axis xyz=\"0 0 1\"/></joint>\
+             <joint name=\"hinge\" type=\"continuous\"><origin xyz=\"0.2 0 0\"/><parent link=\"cart\"/>\
+             <child link=\"pole\"/><axis xyz=\"0 1 0\"/></joint></robot>",
+            inertial(3.0, "0.05 0.02 0", [0.1, 0.2, 0.3]),
+            inertial(0.5, "0 0 0.4", [0.02, 0.02, 0.001]),
+        ),
+    )
+    .unwrap();
+    std::fs::write(d.join("cart.toml"), "urdf = \"cart.urdf\"\n").unwrap();
+    std::fs::write(
+        d.join("cart_hand.toml"),
+        "coordinates = [\n  { name = \"base_x\", unit = \"m\" },\n  { name = \"base_y\", unit = \"m\" },\n\
+         { name = \"base_theta\", unit = \"rad\" },\n  { name = \"hinge\", unit = \"rad\" },\n]\n\
+         [robot]\nname = \"cart_hand\"\ngravity = [0, 0, -9.81]\nactuated = [\"hinge\"]\n\
+         [[body]]\nname = \"cart\"\ntransforms = [\"Tz(0.5)\", \"Tx(base_x)\", \"Ty(base_y)\", \"Rz(base_theta)\"]\n\
+         mass = 3\ncom = [0.05, 0.02, 0]\ninertia = [0.1, 0.2, 0.3, 0, 0, 0]\n\
+         [[body]]\nname = \"pole\"\nparent = \"cart\"\ntransforms = [\"Tx(0.2)\", \"Ry(hinge)\"]\n\
+         mass = 0.5\ncom = [0, 0, 0.4]\ninertia = [0.02, 0.02, 0.001, 0, 0, 0]\n",
+    )
+    .unwrap();
+    let imported = model_at(&d.join("cart.toml"));
+    let names: Vec<&str> = imported
+        .coordinates
+        .iter()
+        .map(|c| c.name.as_str())
+        .collect();
+    assert_eq!(names, ["base_x", "base_y", "base_theta", "hinge"]);
+    let worst = worst_difference(&imported, &model_at(&d.join("cart_hand.toml")));
+    assert!(worst < 1e-13, "planar cart vs its TOML: {worst:e}");
+
+    std::fs::write(
+        d.join("tilted.urdf"),
+        format!(
+            "<robot name=\"tilted\"><link name=\"ground\"/><link name=\"puck\">{}</link>\
+             <joint name=\"p\" type=\"planar\"><origin xyz=\"0.1 0.2 0.3\" rpy=\"0.3 0 0\"/>\
+             <parent link=\"ground\"/><child link=\"puck\"/><axis xyz=\"1 1 0\"/></joint></robot>",
+            inertial(2.0, "0 0 0", [0.1, 0.2, 0.3]),
+        ),
+    )
+    .unwrap();
+    std::fs::write(d.join("tilted.toml"), "urdf = \"tilted.urdf\"\n").unwrap();
+    let m = model_at(&d.join("tilted.toml"));
+    let dv = derived(&m);
+    let p: Vec<f64> = m.parameters.iter().map(|q| q.value).collect();
+    let mut seed = 0x1234_5678_9abc_def0u64;
+    let expected = [2.0, 2.0, 0.15];
+    for _ in 0..8 {
+        let x: Vec<f64> = (0..3).map(|_| 3.0 * random(&mut seed)).collect();
+        let v: Vec<f64> = (0..3).map(|_| random(&mut seed)).collect();
+        let k = kernels(&dv, &p, &x, &v);
+        // No constraints: the kernels are M (3 x 3) then psi.
+        for r in 0..3 {
+            for c in 0..3 {
+                let want = if r == c { expected[r] } else { 0.0 };
+                assert!(
+                    (k[r * 3 + c] - want).abs() < 1e-14,
+                    "M[{r}][{c}] = {} at {x:?}, expected {want}",
+                    k[r * 3 + c]
+                );
+            }
+        }
+    }
+}
+
 /// The largest difference `|a - b| / (1 + |a|)` of the kernels (f, G, gamma, M, psi) of `a` at
 /// `X` and of `b` at `X - shift` (the same coordinates in the same order), at 16 random states.
 fn shifted_difference(a: &Model, b: &Model, shift: &[f64]) -> f64 {

@@ -6,7 +6,7 @@
 //! | `<joint type="revolute\|continuous\|prismatic">` | a coordinate (`rad`, `m`) and the child's steps: `origin` as a `pose`, then the joint about its `axis` |
 //! | `<joint type="fixed">` | the child's steps: the `origin` only |
 //! | `<joint type="floating">` | a free joint: 7 coordinates `NAME_x`, `_y`, `_z` (m), `NAME_qw`, `_qx`, `_qy`, `_qz` (the quaternion, its unit norm a constraint), not actuated; the child's steps: `origin`, then `{ free = [...] }` |
-//! | `<joint type="planar">` | refused |
+//! | `<joint type="planar">` | three coordinates `NAME_x`, `NAME_y` (m), `NAME_theta` (rad), not actuated; the child's steps: `origin`, then `Tx Ty Rz` in the plane normal to `axis` |
 //! | `<inertial>` | `mass`, `com` (= `origin xyz`), `inertia` (turned by `origin rpy` into the link's axes) |
 //! | `<dynamics damping>` | the coordinate's `damping` (`friction` is ignored, with a warning) |
 //! | `<mimic joint multiplier offset>` | a `coupling` loop |
@@ -20,8 +20,8 @@ use roxmltree::{Document, Node};
 
 use super::xml::{Cx, child, children, element};
 use super::{
-    BodyOut, Coord, Imported, LoopOut, Origin, geom, ident, joint_steps, nonzero_list, number,
-    pose_step, quote, unit,
+    BodyOut, Coord, Imported, LoopOut, Origin, fnum, geom, ident, joint_steps, nonzero_list,
+    number, pose_step, quote, unit,
 };
 
 pub(super) fn import(cx: &mut Cx<'_>, doc: &Document<'_>) -> Option<Imported> {
@@ -94,21 +94,12 @@ fn tree<'a, 'i>(cx: &mut Cx<'_>, root: Node<'a, 'i>) -> Option<Tree<'a, 'i>> {
             continue;
         };
         match kind {
-            "revolute" | "continuous" | "prismatic" | "fixed" | "floating" => {}
-            "planar" => {
-                cx.error(
-                    &cx.attr_range(j, "type"),
-                    format!("a `{kind}` joint cannot be imported"),
-                    "not supported",
-                    "a planar joint is no joint of the model language: write it as two prismatic joints and a revolute joint (three coordinates) in the model file",
-                );
-                ok = false;
-            }
+            "revolute" | "continuous" | "prismatic" | "fixed" | "floating" | "planar" => {}
             other => {
                 cx.error(
                     &cx.attr_range(j, "type"),
                     format!("unknown joint type `{other}`"),
-                    "expected revolute, continuous, prismatic or fixed",
+                    "expected revolute, continuous, prismatic, fixed, floating or planar",
                     "",
                 );
                 ok = false;
@@ -194,6 +185,18 @@ fn coordinates(cx: &mut Cx<'_>, joints: &[Node<'_, '_>], out: &mut Imported) {
         if kind == "floating" {
             let origin = cx.origin(j);
             out.coordinates.extend(super::free_joint(&name, &origin).0);
+            continue;
+        }
+        if kind == "planar" {
+            // Three coordinates, not actuated (a base moving in a plane, as `floating`).
+            for (part, unit) in PLANAR {
+                out.coordinates.push(Coord {
+                    name: format!("{name}_{part}"),
+                    unit,
+                    origin: cx.origin(j),
+                    ..Coord::default()
+                });
+            }
             continue;
         }
         let mut c = Coord {
@@ -332,6 +335,28 @@ fn bodies(cx: &mut Cx<'_>, root: Node<'_, '_>, tree: &Tree<'_, '_>, out: &mut Im
         if kind == "floating" {
             let name = cx.joint_name(j.attribute("name").unwrap_or(""));
             transforms.push(super::free_joint(&name, &Origin::default()).1);
+        } else if kind == "planar" {
+            let axis = match child(j, "axis") {
+                Some(a) => a
+                    .attribute_node("xyz")
+                    .and_then(|_| cx.numbers(a, "xyz", 3))
+                    .map(|v| [v[0].1, v[1].1, v[2].1]),
+                None => Some([1.0, 0.0, 0.0]),
+            };
+            let name = cx.joint_name(j.attribute("name").unwrap_or(""));
+            match axis.and_then(unit) {
+                Some(axis) => transforms.extend(planar_steps(&name, axis)),
+                None if axis.is_some() => {
+                    let a = child(j, "axis").unwrap_or(j);
+                    cx.error(
+                        &cx.attr_range(a, "xyz"),
+                        "the joint's axis is zero",
+                        "no direction",
+                        "",
+                    );
+                }
+                None => {}
+            }
         } else if kind != "fixed" {
             let axis = match child(j, "axis") {
                 Some(a) => a
@@ -454,4 +479,29 @@ fn inertial(cx: &mut Cx<'_>, i: Node<'_, '_>) -> Option<(String, [String; 3], [S
         return None;
     }
     Some((number(&mt, mv), com, inertia))
+}
+
+/// A planar joint's coordinates: `NAME_x`, `NAME_y` (m) and `NAME_theta` (rad).
+const PLANAR: [(&str, &str); 3] = [("x", "m"), ("y", "m"), ("theta", "rad")];
+
+/// The steps of a planar joint `name` whose plane is normal to the unit `axis` (of the frame
+/// reached so far): `Tx(NAME_x) Ty(NAME_y) Rz(NAME_theta)` in a frame whose z is the axis (the
+/// joint's own frame when the axis is z; else the turn taking z onto the axis, the steps, and
+/// that turn undone, so the plane's x and y are the turned frame's).
+fn planar_steps(name: &str, axis: [f64; 3]) -> Vec<String> {
+    let [x, y, t] = PLANAR.map(|(p, _)| quote(&format!("{name}_{p}")));
+    let steps = [
+        format!("{{ prismatic = {x}, axis = \"x\" }}"),
+        format!("{{ prismatic = {y}, axis = \"y\" }}"),
+        format!("{{ revolute = {t} }}"),
+    ];
+    if axis == [0.0, 0.0, 1.0] {
+        return steps.to_vec();
+    }
+    let turn = geom::z_onto(axis);
+    let aa = format!("{{ axis_angle = [{}] }}", turn.map(fnum).join(", "));
+    let mut out = vec![aa.clone()];
+    out.extend(steps);
+    out.push(format!("{{ inverse = [{aa}] }}"));
+    out
 }
