@@ -264,8 +264,19 @@ pub fn forward_dynamics_derivatives_with<K: Derivatives<N, M>, const N: usize, c
     solver: DerivativesSolver,
 ) -> Result<DynamicsReport, SolverError> {
     let (report, reduced) = prepare(model, data, out, u, q_forces, baumgarte, solver)?;
-    solve_prepared(model, data, out, reduced)?;
+    solve_prepared(model, data, out, reduced, Outputs::All)?;
     Ok(report)
+}
+
+/// What [`solve_prepared`] writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Outputs {
+    /// Every output of [`ForwardDynamicsDerivatives`].
+    All,
+    /// After the elimination, only the rows of `∂Ẍ/∂(X, Ẋ, U)` (`xddot_rows`,
+    /// `low_rank_rows`): not `∂lambda`, not the column-major `dxddot_*` (the dense LU writes
+    /// everything).
+    XddotRows,
 }
 
 /// The right-hand sides of the last [`prepare`] solved: by the elimination when its factors
@@ -275,9 +286,10 @@ pub(crate) fn solve_prepared<K: Derivatives<N, M>, const N: usize, const M: usiz
     data: &Data<N, M>,
     out: &mut ForwardDynamicsDerivatives<N, M>,
     reduced: bool,
+    outputs: Outputs,
 ) -> Result<(), SolverError> {
     if reduced {
-        reduced_solve_all(model, data, out)
+        reduced_solve_all(model, data, out, outputs)
     } else {
         saddle_solve_all(model, data, out)
     }
@@ -610,6 +622,7 @@ fn reduced_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &Data<N, M>,
     out: &mut ForwardDynamicsDerivatives<N, M>,
+    outputs: Outputs,
 ) -> Result<(), SolverError> {
     let s = model.structure();
     let (ik, z) = (s.ik_blocks, s.outputs);
@@ -756,6 +769,15 @@ fn reduced_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
             t.flush(xr, wz, w);
         }
     }
+    if outputs == Outputs::XddotRows {
+        return if all_finite(wx) {
+            Ok(())
+        } else {
+            Err(SolverError::NonFinite {
+                what: "dynamics_derivatives",
+            })
+        };
+    }
     // Lambda: K_bᵀ lambda_b = (A - M X)[C_b], into the rows of B.
     for blk in blocks {
         for &r in blk.iter() {
@@ -851,36 +873,28 @@ fn to_rows<const R: usize, const C: usize>(
     }
 }
 
-/// `cols[j][i] = rows[i w + at + j]`: the inverse of [`to_rows`] (without the scale).
+/// `cols[j][i] = rows[i w + at + j]`: the inverse of [`to_rows`] (without the scale), two rows
+/// at a time (each column gets a pair of entries).
 fn from_rows<const R: usize, const C: usize>(
     rows: &[f64],
     w: usize,
     at: usize,
     cols: &mut [[f64; R]; C],
 ) {
-    let (pairs, last) = cols.as_chunks_mut::<2>();
-    for (jp, [c0, c1]) in pairs.iter_mut().enumerate() {
-        let j = at + 2 * jp;
-        let ip = R / 2;
-        for q in 0..ip {
-            let i = 2 * q;
-            let (a0, b0) = (rows[i * w + j], rows[i * w + j + 1]);
-            let (a1, b1) = (rows[(i + 1) * w + j], rows[(i + 1) * w + j + 1]);
-            c0[i] = a0;
-            c0[i + 1] = a1;
-            c1[i] = b0;
-            c1[i + 1] = b1;
+    let row = |i: usize| &rows[i * w + at..i * w + at + C];
+    let mut i = 0;
+    while i + 1 < R {
+        let (r0, r1) = (row(i), row(i + 1));
+        for (col, (&a, &b)) in cols.iter_mut().zip(r0.iter().zip(r1)) {
+            if let Some(pair) = col.get_mut(i..i + 2) {
+                pair.copy_from_slice(&[a, b]);
+            }
         }
-        if R % 2 == 1 {
-            let i = R - 1;
-            c0[i] = rows[i * w + j];
-            c1[i] = rows[i * w + j + 1];
-        }
+        i += 2;
     }
-    if let [c] = last {
-        let j = at + C - 1;
-        for (i, v) in c.iter_mut().enumerate() {
-            *v = rows[i * w + j];
+    if i < R {
+        for (col, &a) in cols.iter_mut().zip(row(i)) {
+            col[i] = a;
         }
     }
 }

@@ -17,7 +17,7 @@
 //! `∂(G Ẋ)/∂X = ½ ∂c/∂Ẋ`: the acceleration constraint's `gamma = -Ġ Ẋ` is the quadratic form
 //! of the symmetric second derivatives of `f`, so `∂gamma/∂Ẋ = -2 ∂(G Ẋ)/∂X` and the kernel's
 //! `∂c/∂Ẋ = -∂gamma/∂Ẋ` holds it. Then, with forward dynamics' derivatives
-//! ([`forward_dynamics_derivatives`]) at the state,
+//! ([`forward_dynamics_derivatives`](crate::forward_dynamics_derivatives)) at the state,
 //!
 //! ```text
 //! ∂ÿ/∂ẏ = (∂Ẍ/∂Ẋ T)[y, :],   ∂ÿ/∂y = (∂Ẍ/∂X T + ∂Ẍ/∂Ẋ ∂Ẋ/∂y)[y, :],   ∂ÿ/∂U = ∂Ẍ/∂U[y, :]
@@ -30,7 +30,8 @@ use nalgebra::SMatrix;
 
 use super::baumgarte::Baumgarte;
 use super::derivatives::{
-    DerivativesSolver, ForwardDynamicsDerivatives, P_MAX, prepare, row_width, solve_prepared,
+    DerivativesSolver, ForwardDynamicsDerivatives, Outputs, P_MAX, prepare, row_width,
+    solve_prepared,
 };
 use super::input::all_finite;
 use super::report::DynamicsReport;
@@ -160,9 +161,9 @@ impl<const N: usize, const M: usize> Default for Linearization<N, M> {
 /// Forward dynamics and its derivatives at `data.x`, `data.xdot` (on the constraint manifold)
 /// with the control forces `u` and the applied forces `q_forces` (held fixed), then the
 /// linearisation in the coordinates `coordinates` into `out` (see the [module](self)
-/// documentation). Writes what [`forward_dynamics_derivatives`] writes and returns its report.
+/// documentation). Writes what [`forward_dynamics_derivatives`](crate::forward_dynamics_derivatives) writes and returns its report.
 ///
-/// Errors: those of [`forward_dynamics_derivatives`]; `Underactuated` for
+/// Errors: those of [`forward_dynamics_derivatives`](crate::forward_dynamics_derivatives); `Underactuated` for
 /// `Coordinates::Actuated` on a robot that is not fully actuated, `MissingOutputs` (as the
 /// solvers that need outputs) for `Coordinates::Outputs` on a robot without them, `Dimension`
 /// when the other coordinates are not `M` many; `Singular` (`what`: `"G_c"`) when `G`
@@ -221,7 +222,7 @@ pub fn linearize<K: Derivatives<N, M>, const N: usize, const M: usize>(
         }
         return finite_result(out).map(|()| report);
     }
-    solve_prepared(model, data, &mut out.derivatives, reduced)?;
+    solve_prepared(model, data, &mut out.derivatives, reduced, Outputs::All)?;
     if reduced && outputs_path {
         tangent_reduced(model, out)?;
     } else {
