@@ -463,8 +463,7 @@ fn reduced_outputs<K: Derivatives<N, M>, const N: usize, const M: usize, const W
     Ok(())
 }
 
-/// `out[j] = Σ_i dr[j][i] qr[i] + Σ_i dc[j][i] qc[i]`, skipping the zero entries of column `j`
-/// four at a time.
+/// `out[j] = Σ_i dr[j][i] qr[i] + Σ_i dc[j][i] qc[i]` over the non-zero entries of column `j`.
 fn project<const N: usize, const M: usize, const W: usize>(
     dr: &[[f64; N]; N],
     dc: &[[f64; M]; N],
@@ -480,29 +479,22 @@ fn project<const N: usize, const M: usize, const W: usize>(
     }
 }
 
-/// `acc += Σ_i col[i] q[i]` over the non-zero `col[i]`, tested four at a time.
+/// `acc += Σ_i col[i] q[i]` over the non-zero `col[i]`: a mask of them per 64 entries (no
+/// branch per entry), then its set bits.
 #[inline(always)]
 fn sparse_axpys<const W: usize>(acc: &mut [f64; W], col: &[f64], q: &[[f64; W]]) {
-    let (quads, rest) = col.as_chunks::<4>();
-    let (qq, qrest) = q.split_at(4 * quads.len());
-    for (c4, q4) in quads.iter().zip(qq.chunks_exact(4)) {
-        // A zero (of either sign) has no bits but the sign's.
-        let any = c4.iter().fold(0_u64, |m, v| m | v.to_bits()) << 1;
-        if any == 0 {
-            continue;
+    for (c64, q64) in col.chunks(64).zip(q.chunks(64)) {
+        let mut mask = 0_u64;
+        for (k, &v) in c64.iter().enumerate() {
+            mask |= u64::from(v != 0.0) << k;
         }
-        for (&v, qv) in c4.iter().zip(q4) {
-            if v != 0.0 {
+        while mask != 0 {
+            let i = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            if let (Some(&v), Some(qv)) = (c64.get(i), q64.get(i)) {
                 for (a, &x) in acc.iter_mut().zip(qv) {
                     *a += v * x;
                 }
-            }
-        }
-    }
-    for (&v, qv) in rest.iter().zip(qrest) {
-        if v != 0.0 {
-            for (a, &x) in acc.iter_mut().zip(qv) {
-                *a += v * x;
             }
         }
     }
