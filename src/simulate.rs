@@ -562,6 +562,7 @@ pub fn linearize<K: Dynamics<N, M>, const N: usize, const M: usize>(
         rbss_runtime::Coordinates::Outputs
     };
     let mut lin = rbss_runtime::Linearization::new();
+    lin.full_derivatives = true; // written out below
     rbss_runtime::linearize(model, &mut data, &mut lin, &u, None, coordinates)
         .map_err(|e| format!("{path}: linearize: {e}"))?;
     let (d, k) = (lin.d, lin.na);

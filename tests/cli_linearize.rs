@@ -41,6 +41,7 @@ fn case<K: rbss_runtime::Dynamics<N, M>, const N: usize, const M: usize>(
     let path = dir.join("state.json");
     std::fs::write(&path, state.to_string()).unwrap();
     let mut lin = Linearization::new();
+    lin.full_derivatives = true; // the command writes the full derivatives
     linearize(model, &mut data, &mut lin, u, None, c).unwrap();
     (path.to_str().unwrap().to_string(), data, lin)
 }

@@ -53,8 +53,16 @@ fn check<K: Derivatives<N, M>, const N: usize, const M: usize>(
         let u: Vec<f64> = (0..na).map(|_| rng.range(-2.0, 2.0)).collect();
         let mut data = Data::new(model);
         place(&mut data, &y, &yd).unwrap_or_else(|e| panic!("{name}: place: {e}"));
+        let at = data.clone();
         linearize(model, &mut data, &mut lin, &u, None, coordinates)
             .unwrap_or_else(|e| panic!("{name}: linearize: {e}"));
+        // The same linearisation through the full derivatives (in the outputs' coordinates on
+        // the elimination, the default solves only the directions on the manifold).
+        let mut full = Linearization::<N, M>::new();
+        full.full_derivatives = true;
+        linearize(model, &mut at.clone(), &mut full, &u, None, coordinates)
+            .unwrap_or_else(|e| panic!("{name}: linearize (full): {e}"));
+        agree(name, &lin, &full, d, na);
         assert_eq!((lin.d, lin.na), (d, na));
         // G T = 0 and T[y, :] = I.
         let g = data.g().clone_owned();
@@ -169,6 +177,48 @@ fn check<K: Derivatives<N, M>, const N: usize, const M: usize>(
         "{name} {coordinates:?}: linearisation vs differences along the manifold, worst {worst:.2e}"
     );
     worst
+}
+
+/// `lin` and `full` agree to `1e-12` of each matrix's largest entry, the condition numbers
+/// exactly (both from the blocks' norms or both from the same LU).
+fn agree<const N: usize, const M: usize>(
+    name: &str,
+    lin: &Linearization<N, M>,
+    full: &Linearization<N, M>,
+    d: usize,
+    na: usize,
+) {
+    assert_eq!((full.d, full.na), (d, na));
+    assert_eq!(lin.cond, full.cond, "{name}: cond");
+    let pairs = [
+        ("tangent", &lin.tangent, &full.tangent, N, d),
+        ("dxdot_dy", &lin.dxdot_dy, &full.dxdot_dy, N, d),
+        ("dyddot_dy", &lin.dyddot_dy, &full.dyddot_dy, d, d),
+        ("dyddot_dydot", &lin.dyddot_dydot, &full.dyddot_dydot, d, d),
+        ("dyddot_du", &lin.dyddot_du, &full.dyddot_du, d, na),
+    ];
+    for (what, a, b, rows, cols) in pairs {
+        let scale = b.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+        for i in 0..rows {
+            for k in 0..cols {
+                let (x, y) = (a[(i, k)], b[(i, k)]);
+                assert!(
+                    (x - y).abs() <= 1e-12 * scale,
+                    "{name} {what}[{i},{k}]: {x:e} vs full derivatives' {y:e} (scale {scale:e})"
+                );
+            }
+        }
+        // Nothing outside the block in use.
+        let outside = a
+            .iter()
+            .enumerate()
+            .filter(|&(e, _)| e % N >= rows || e / N >= cols)
+            .fold(0.0_f64, |m, (_, v)| m.max(v.abs()));
+        assert_eq!(
+            outside, 0.0,
+            "{name} {what}: entries outside {rows} x {cols}"
+        );
+    }
 }
 
 fn tight<K: rbss_runtime::tasks::Robot<N, M>, const N: usize, const M: usize>(

@@ -56,6 +56,14 @@ pub(crate) const P_MAX: usize = 16;
 /// `(Rᵀ, the blocks' K_b⁻¹, (max ‖K_b‖₁, max ‖K_b⁻¹‖₁))` of the elimination.
 pub(crate) type ReducedParts<'a> = (&'a [f64], &'a [f64], (f64, f64));
 
+/// The elimination's factors (see [`ForwardDynamicsDerivatives::reduced_factors`]).
+pub(crate) struct ReducedFactors<'a> {
+    pub rt: &'a [f64],
+    pub mrt: &'a [f64],
+    pub chol: &'a [f64],
+    pub inv: &'a [f64],
+}
+
 /// The derivatives of forward dynamics at one state and the buffers that compute them:
 /// [`ForwardDynamicsDerivatives::new`] allocates once, [`forward_dynamics_derivatives`] never.
 #[derive(Debug, Clone)]
@@ -96,6 +104,9 @@ pub struct ForwardDynamicsDerivatives<const N: usize, const M: usize> {
     /// `Reduced`: the largest 1-norms of the blocks `K_b` and of their inverses (the exact
     /// 1-norm condition number of the block-diagonal `G_y` is their product).
     norms: (f64, f64),
+    /// Baumgarte's terms were added to `dc_dx`, `dc_dxdot` (possibly off the kernel's
+    /// structural non-zeros, which are all it writes): the next call clears them first.
+    gains_added: bool,
     /// `K_b⁻¹` of every block, column-major, packed in block order.
     inv: Vec<f64>,
     /// `Rᵀ`: `P` rows of length N (row `c`: the motion of output `c`).
@@ -139,6 +150,7 @@ impl<const N: usize, const M: usize> ForwardDynamicsDerivatives<N, M> {
             cond_blocks: f64::NAN,
             cond: f64::NAN,
             norms: (f64::NAN, f64::NAN),
+            gains_added: false,
             inv: vec![0.0; M * linalg::INVERT_MAX],
             rt: vec![0.0; P_MAX * N],
             mrt: vec![0.0; P_MAX * N],
@@ -170,6 +182,19 @@ impl<const N: usize, const M: usize> ForwardDynamicsDerivatives<N, M> {
     /// order) and the largest 1-norms of `K_b` and `K_b⁻¹`; `None` after the dense LU.
     pub(crate) fn reduced_parts(&self) -> Option<ReducedParts<'_>> {
         (self.method == DynamicsMethod::Reduced).then_some((&self.rt, &self.inv, self.norms))
+    }
+
+    /// After the elimination's factors (`method == Reduced`) with `p` outputs: `Rᵀ` and
+    /// `(M R)ᵀ` (`p` rows of length N), the Cholesky factor of `Rᵀ M R` (`p × p`,
+    /// column-major, lower triangle) and the blocks' `K_b⁻¹` (column-major, packed in block
+    /// order); `None` after the dense LU.
+    pub(crate) fn reduced_factors(&self, p: usize) -> Option<ReducedFactors<'_>> {
+        (self.method == DynamicsMethod::Reduced && p <= P_MAX).then(|| ReducedFactors {
+            rt: &self.rt[..p * N],
+            mrt: &self.mrt[..p * N],
+            chol: &self.chol[..p * p],
+            inv: &self.inv,
+        })
     }
 
     /// After the elimination: `∂Ẍ/∂(X, Ẋ, U) = X0 + R Z` split, as rows of the row width:
@@ -238,12 +263,61 @@ pub fn forward_dynamics_derivatives_with<K: Derivatives<N, M>, const N: usize, c
     baumgarte: Baumgarte,
     solver: DerivativesSolver,
 ) -> Result<DynamicsReport, SolverError> {
+    let (report, reduced) = prepare(model, data, out, u, q_forces, baumgarte, solver)?;
+    solve_prepared(model, data, out, reduced, Outputs::All)?;
+    Ok(report)
+}
+
+/// What [`solve_prepared`] writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Outputs {
+    /// Every output of [`ForwardDynamicsDerivatives`].
+    All,
+    /// After the elimination, only the rows of `∂Ẍ/∂(X, Ẋ, U)` (`xddot_rows`,
+    /// `low_rank_rows`): not `∂lambda`, not the column-major `dxddot_*` (the dense LU writes
+    /// everything).
+    XddotRows,
+}
+
+/// The right-hand sides of the last [`prepare`] solved: by the elimination when its factors
+/// were certified (`reduced`), else by the dense LU (which decides `Singular`).
+pub(crate) fn solve_prepared<K: Derivatives<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &Data<N, M>,
+    out: &mut ForwardDynamicsDerivatives<N, M>,
+    reduced: bool,
+    outputs: Outputs,
+) -> Result<(), SolverError> {
+    if reduced {
+        reduced_solve_all(model, data, out, outputs)
+    } else {
+        saddle_solve_all(model, data, out)
+    }
+}
+
+/// Everything of [`forward_dynamics_derivatives_with`] but the right-hand sides' solve:
+/// forward dynamics, the kernel's `∂r`, `∂c` (with Baumgarte's terms) and, for
+/// `DerivativesSolver::Auto`, the elimination's factors (`method`, `cond_blocks`, `cond` set
+/// when certified). Returns forward dynamics' report and whether the elimination's factors
+/// are certified (the right-hand sides then go through them, see [`solve_prepared`]).
+pub(crate) fn prepare<K: Derivatives<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    data: &mut Data<N, M>,
+    out: &mut ForwardDynamicsDerivatives<N, M>,
+    u: &[f64],
+    q_forces: Option<&[f64; N]>,
+    baumgarte: Baumgarte,
+    solver: DerivativesSolver,
+) -> Result<(DynamicsReport, bool), SolverError> {
     let report = forward_dynamics(model, data, u, q_forces, baumgarte)?;
     let Baumgarte { alpha, beta } = baumgarte;
     // The kernel writes only the structural non-zeros: clear what the gains' terms of an
     // earlier call may have left elsewhere.
-    out.dc_dx.as_mut_slice().fill(0.0);
-    out.dc_dxdot.as_mut_slice().fill(0.0);
+    if out.gains_added {
+        out.dc_dx.as_mut_slice().fill(0.0);
+        out.dc_dxdot.as_mut_slice().fill(0.0);
+        out.gains_added = false;
+    }
     model.kernels().dynamics_derivatives(
         &data.x,
         &data.xdot,
@@ -267,6 +341,7 @@ pub fn forward_dynamics_derivatives_with<K: Derivatives<N, M>, const N: usize, c
         }
     }
     if alpha != 0.0 || beta != 0.0 {
+        out.gains_added = true;
         let g = &data.g.data.0;
         let b2 = beta * beta;
         for ((cx, cv), gc) in out
@@ -291,13 +366,11 @@ pub fn forward_dynamics_derivatives_with<K: Derivatives<N, M>, const N: usize, c
         out.method = DynamicsMethod::Reduced;
         out.cond_blocks = cond_blocks;
         out.cond = cond;
-        reduced_solve_all(model, data, out)?;
     } else {
         out.method = DynamicsMethod::SaddlePoint;
         out.cond_blocks = f64::INFINITY;
-        saddle_solve_all(model, data, out)?;
     }
-    Ok(report)
+    Ok((report, reduced.is_some()))
 }
 
 /// The elimination's factors at `data` (see the [module](self) documentation) into `out`:
@@ -549,6 +622,7 @@ fn reduced_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     data: &Data<N, M>,
     out: &mut ForwardDynamicsDerivatives<N, M>,
+    outputs: Outputs,
 ) -> Result<(), SolverError> {
     let s = model.structure();
     let (ik, z) = (s.ik_blocks, s.outputs);
@@ -695,6 +769,15 @@ fn reduced_solve_all<K: Derivatives<N, M>, const N: usize, const M: usize>(
             t.flush(xr, wz, w);
         }
     }
+    if outputs == Outputs::XddotRows {
+        return if all_finite(wx) {
+            Ok(())
+        } else {
+            Err(SolverError::NonFinite {
+                what: "dynamics_derivatives",
+            })
+        };
+    }
     // Lambda: K_bᵀ lambda_b = (A - M X)[C_b], into the rows of B.
     for blk in blocks {
         for &r in blk.iter() {
@@ -790,36 +873,28 @@ fn to_rows<const R: usize, const C: usize>(
     }
 }
 
-/// `cols[j][i] = rows[i w + at + j]`: the inverse of [`to_rows`] (without the scale).
+/// `cols[j][i] = rows[i w + at + j]`: the inverse of [`to_rows`] (without the scale), two rows
+/// at a time (each column gets a pair of entries).
 fn from_rows<const R: usize, const C: usize>(
     rows: &[f64],
     w: usize,
     at: usize,
     cols: &mut [[f64; R]; C],
 ) {
-    let (pairs, last) = cols.as_chunks_mut::<2>();
-    for (jp, [c0, c1]) in pairs.iter_mut().enumerate() {
-        let j = at + 2 * jp;
-        let ip = R / 2;
-        for q in 0..ip {
-            let i = 2 * q;
-            let (a0, b0) = (rows[i * w + j], rows[i * w + j + 1]);
-            let (a1, b1) = (rows[(i + 1) * w + j], rows[(i + 1) * w + j + 1]);
-            c0[i] = a0;
-            c0[i + 1] = a1;
-            c1[i] = b0;
-            c1[i + 1] = b1;
+    let row = |i: usize| &rows[i * w + at..i * w + at + C];
+    let mut i = 0;
+    while i + 1 < R {
+        let (r0, r1) = (row(i), row(i + 1));
+        for (col, (&a, &b)) in cols.iter_mut().zip(r0.iter().zip(r1)) {
+            if let Some(pair) = col.get_mut(i..i + 2) {
+                pair.copy_from_slice(&[a, b]);
+            }
         }
-        if R % 2 == 1 {
-            let i = R - 1;
-            c0[i] = rows[i * w + j];
-            c1[i] = rows[i * w + j + 1];
-        }
+        i += 2;
     }
-    if let [c] = last {
-        let j = at + C - 1;
-        for (i, v) in c.iter_mut().enumerate() {
-            *v = rows[i * w + j];
+    if i < R {
+        for (col, &a) in cols.iter_mut().zip(row(i)) {
+            col[i] = a;
         }
     }
 }

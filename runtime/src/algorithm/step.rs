@@ -13,7 +13,7 @@
 //! By the chain rule through the stages: with `D` the derivative with respect to `(s, U)`,
 //! `D s_i = [I 0] + c_i h D k_{i-1}` and `D k_i = J(s_i) D s_i + [0 B(s_i)]`, where
 //! `J = [0 I; ∂Ẍ/∂X ∂Ẍ/∂Ẋ]` and `B = [0; ∂Ẍ/∂U]` come from
-//! [`forward_dynamics_derivatives_with`] at each stage (four for RK4, one for Euler).
+//! [`forward_dynamics_derivatives_with`](crate::forward_dynamics_derivatives_with) at each stage (four for RK4, one for Euler).
 //!
 //! The RK4 products run over rows (all `2N + na` directions of a row at once, the solve's own
 //! layout) and use the elimination's split `[∂Ẍ/∂X ∂Ẍ/∂Ẋ] = X0 + R Z`: `Z D k` on the `P`
@@ -23,8 +23,8 @@
 
 use super::baumgarte::Baumgarte;
 use super::derivatives::{
-    DerivativesSolver, ForwardDynamicsDerivatives, P_MAX, Terms, forward_dynamics_derivatives_with,
-    row_width,
+    DerivativesSolver, ForwardDynamicsDerivatives, Outputs, P_MAX, Terms, prepare, row_width,
+    solve_prepared,
 };
 use super::forward_dynamics::forward_dynamics;
 use super::report::DynamicsReport;
@@ -110,7 +110,8 @@ pub fn semi_implicit_euler_step<K: Derivatives<N, M>, const N: usize, const M: u
     Ok(report)
 }
 
-/// Forward dynamics' derivatives at `(x, xdot)` into `out.derivatives`, `Ẍ` into `acc`.
+/// Forward dynamics' derivatives at `(x, xdot)` into `out.derivatives` (`outputs` of them),
+/// `Ẍ` into `acc`.
 #[allow(clippy::too_many_arguments)]
 fn stage<K: Derivatives<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
@@ -121,10 +122,11 @@ fn stage<K: Derivatives<N, M>, const N: usize, const M: usize>(
     x: &[f64; N],
     xdot: &[f64; N],
     acc: &mut [f64; N],
+    outputs: Outputs,
 ) -> Result<(), SolverError> {
     data.x = *x;
     data.xdot = *xdot;
-    forward_dynamics_derivatives_with(
+    let (_, reduced) = prepare(
         model,
         data,
         &mut out.derivatives,
@@ -133,6 +135,7 @@ fn stage<K: Derivatives<N, M>, const N: usize, const M: usize>(
         baumgarte,
         DerivativesSolver::Auto,
     )?;
+    solve_prepared(model, data, &mut out.derivatives, reduced, outputs)?;
     *acc = data.xddot;
     Ok(())
 }
@@ -140,7 +143,7 @@ fn stage<K: Derivatives<N, M>, const N: usize, const M: usize>(
 /// One classic RK4 step of `dt` from `data.x`, `data.xdot` with the control forces `u` held
 /// and Baumgarte's gains `baumgarte`, and its Jacobians `F_x`, `F_u` (see the
 /// [module](self) documentation) into `out`; the new state in `out.x`, `out.xdot` (`data`
-/// holds the last stage's). Errors: those of [`forward_dynamics_derivatives_with`] at any
+/// holds the last stage's). Errors: those of [`forward_dynamics_derivatives_with`](crate::forward_dynamics_derivatives_with) at any
 /// stage; `NonFinite` for a `dt` or a Jacobian that is not finite.
 pub fn rk4_step_derivatives<K: Derivatives<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
@@ -173,7 +176,14 @@ pub fn rk4_step_derivatives<K: Derivatives<N, M>, const N: usize, const M: usize
                 vs[j] = v0[j] + c * dt * kv[j];
             }
         }
-        stage(model, data, out, u, baumgarte, &xs, &vs, &mut acc)?;
+        // The rows of ∂Ẍ are all the products use; the last stage's derivatives whole (what
+        // `out.derivatives` documents).
+        let outputs = if i + 1 < stages.len() {
+            Outputs::XddotRows
+        } else {
+            Outputs::All
+        };
+        stage(model, data, out, u, baumgarte, &xs, &vs, &mut acc, outputs)?;
         // D Ẍ_i = wx_i + c h (J_x,i D Ẋ_{i-1} + J_v,i D Ẍ_{i-1}) with
         // D Ẋ_{i-1} = E_v + c_{i-1} h D Ẍ_{i-2} (module documentation; wx_i the rows of
         // [∂Ẍ/∂X ∂Ẍ/∂Ẋ ∂Ẍ/∂U] at the stage, E_v the unit rows of Ẋ).
@@ -282,7 +292,7 @@ impl JdProduct {
 
 /// One semi-implicit Euler step ([`semi_implicit_euler_step`]) and its Jacobians `F_x`, `F_u`
 /// into `out` (the new state in `out.x`, `out.xdot` and in `data`). Errors: those of
-/// [`forward_dynamics_derivatives_with`]; `NonFinite` for a `dt` or a Jacobian that is not
+/// [`forward_dynamics_derivatives_with`](crate::forward_dynamics_derivatives_with); `NonFinite` for a `dt` or a Jacobian that is not
 /// finite.
 pub fn semi_implicit_euler_step_derivatives<
     K: Derivatives<N, M>,
@@ -305,7 +315,17 @@ pub fn semi_implicit_euler_step_derivatives<
     out.na = na;
     let (x0, v0) = (data.x, data.xdot);
     let mut acc = [0.0; N];
-    stage(model, data, out, u, baumgarte, &x0, &v0, &mut acc)?;
+    stage(
+        model,
+        data,
+        out,
+        u,
+        baumgarte,
+        &x0,
+        &v0,
+        &mut acc,
+        Outputs::All,
+    )?;
     // D Ẋ' = [0 I 0] + h [∂Ẍ/∂X ∂Ẍ/∂Ẋ ∂Ẍ/∂U]; D X' = [I 0 0] + h D Ẋ'.
     let fd = &out.derivatives;
     let jac = &mut out.jacobian[..len];
