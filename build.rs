@@ -11,8 +11,7 @@
 //!
 //! Robots in [`OPTIONAL`] (test and scaling robots the main job does not use, and that cost
 //! compile time) are registered only with the cargo feature `all-robots`. Without the default
-//! feature `robots` only [`ALWAYS`] is: that is how a `--model-file` library (src/model_file.rs)
-//! builds this crate, so that its first build does not compile the other robots' solvers.
+//! feature `robots` only [`ALWAYS`] is (a build of the command with one robot compiled in).
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -36,8 +35,7 @@ const OPTIONAL: &[&str] = &[
 ];
 
 /// The robot every build registers: `paper`, `stress` and the default trajectory (TraekP) are
-/// its. Without the feature `robots` (a `--model-file` library's build of this crate, which
-/// runs its one robot through `cli::main_with_model`) it is the only one.
+/// its. Without the feature `robots` it is the only one.
 const ALWAYS: &str = "stewart_6ups";
 
 /// One registered robot.

@@ -1,10 +1,14 @@
 //! `--model-file PATH`: a robot from a model file, without rebuilding the command.
 //!
-//! The first run generates the robot's crate (`rbss-codegen --out`), writes a `cdylib` crate
-//! around it (the C ABI of `ffi/include/rbss.h` and [`crate::export_command!`] (in `crate::entry`), two lines),
-//! compiles only that with cargo, and keeps the library in a cache entry; every run then loads
-//! the library (dlopen) and lets it run the subcommand on its robot through
-//! [`crate::cli::run_with_model`], the code the robots compiled into the command use.
+//! The first run generates the robot's crate (the generator `rbss_codegen`, in this process),
+//! writes the file that includes it in the workspace's library crate `robot-lib/` (the C ABI of
+//! `ffi/include/rbss.h` and [`crate::export_command!`] (in `crate::entry`), two lines),
+//! compiles that crate with cargo (`-p rbss-robot-lib`, `RBSS_ROBOT_LIB` naming the file), and
+//! keeps the library in a cache entry; every run then loads the library (dlopen) and lets it
+//! run the subcommand on its robot through [`crate::cli::run_with_model`], the code the robots
+//! compiled into the command use. The library crate is a member of the rbss workspace and
+//! depends on the rbss crates as the command does, so that in the command's own build
+//! directory cargo finds them compiled: a first run compiles the robot alone.
 //!
 //! The cache entry's key is a SHA-256 of what the library is made from ([`Inputs`]): the model
 //! file's canonical path and the bytes of the model file and of every file it includes (the
@@ -35,8 +39,8 @@
 //! directory for the entries (shared by all, so the runtime and its dependencies are compiled
 //! once) is `$RBSS_CACHE_TARGET`, else the cargo build directory this command was built in
 //! (`target/` of the sources: what `cargo run --release` compiled is reused), else `target/`
-//! in the cache. The generator is `$RBSS_CODEGEN`, else `rbss-codegen` beside this command
-//! (built there on first use when this command was built from the sources), else on `PATH`.
+//! in the cache. The generator runs in this process; `$RBSS_CODEGEN` names a generator
+//! command to run instead (`rbss-codegen`'s `--out DIR MODEL`).
 
 use std::ffi::{CString, c_char, c_int};
 use std::fs;
@@ -69,10 +73,9 @@ pub struct Cache {
     pub target: PathBuf,
     /// The rbss sources the libraries are compiled from.
     pub source: PathBuf,
-    /// The generator (`rbss-codegen`).
-    pub codegen: PathBuf,
-    /// Whether to build the generator where `codegen` names it when it is not there.
-    pub build_codegen: bool,
+    /// A generator command to run (`$RBSS_CODEGEN`, called as `rbss-codegen --out DIR
+    /// MODEL`) instead of the generator in this process.
+    pub codegen: Option<PathBuf>,
     /// cargo.
     pub cargo: PathBuf,
 }
@@ -93,31 +96,15 @@ impl Cache {
         let own = own_target_dir();
         let target = match std::env::var_os("RBSS_CACHE_TARGET") {
             Some(t) if !t.is_empty() => PathBuf::from(t),
-            // The build directory this command was built in: the ~40 dependencies from
-            // crates.io are compiled there already (the rbss crates are compiled once more: out
-            // of their workspace, cargo hashes them differently), so a first run compiles those
-            // and the robot only.
-            _ => own.clone().unwrap_or_else(|| dir.join("target")),
+            // The build directory this command was built in: the rbss crates and their
+            // dependencies are compiled there already, as the library crate (a member of the
+            // same workspace, with the command's features) needs them, so a first run compiles
+            // the robot only.
+            _ => own.unwrap_or_else(|| dir.join("target")),
         };
-        let mut build_codegen = false;
-        let codegen = match std::env::var_os("RBSS_CODEGEN") {
-            Some(c) if !c.is_empty() => PathBuf::from(c),
-            _ => {
-                let beside = std::env::current_exe()
-                    .ok()
-                    .and_then(|e| e.parent().map(|p| p.join("rbss-codegen")));
-                match beside {
-                    Some(p) if p.is_file() => p,
-                    // Built by cargo from the sources but without the generator (the README's
-                    // `cargo run --release -- paper` builds `rbss` alone): build it there once.
-                    Some(p) if own.is_some() => {
-                        build_codegen = true;
-                        p
-                    }
-                    _ => PathBuf::from("rbss-codegen"),
-                }
-            }
-        };
+        let codegen = std::env::var_os("RBSS_CODEGEN")
+            .filter(|c| !c.is_empty())
+            .map(PathBuf::from);
         let cargo = match std::env::var_os("CARGO") {
             Some(c) if !c.is_empty() => PathBuf::from(c),
             _ => PathBuf::from("cargo"),
@@ -127,60 +114,8 @@ impl Cache {
             target,
             source: PathBuf::from(SOURCE),
             codegen,
-            build_codegen,
             cargo,
         })
-    }
-
-    /// Builds the generator where [`Cache::codegen`] names it (beside this command, in its
-    /// cargo build directory) if it is not there yet: the sources' `cargo build --release -p
-    /// rbss-codegen`, once, with a progress line.
-    fn ensure_codegen(&self, progress: &mut dyn FnMut(&str)) -> Result<(), String> {
-        if !self.build_codegen || self.codegen.is_file() {
-            return Ok(());
-        }
-        let Some(target) = self.codegen.parent().and_then(Path::parent) else {
-            return Ok(());
-        };
-        progress(&format!(
-            "building the generator rbss-codegen once (cargo, in {}) ...",
-            target.display()
-        ));
-        let t0 = std::time::Instant::now();
-        let out = Command::new(&self.cargo)
-            .args([
-                "build",
-                "--release",
-                "--quiet",
-                "-p",
-                "rbss-codegen",
-                "--manifest-path",
-            ])
-            .arg(self.source.join("Cargo.toml"))
-            .env("CARGO_TARGET_DIR", target)
-            .env_remove("CARGO_BUILD_TARGET_DIR")
-            .stdout(std::process::Stdio::null())
-            .output()
-            .map_err(|e| {
-                format!(
-                    "cannot run cargo `{}` ({e}) to build the generator: build it (`cargo \
-                     build --release -p rbss-codegen`) or name it with RBSS_CODEGEN",
-                    self.cargo.display()
-                )
-            })?;
-        if !out.status.success() || !self.codegen.is_file() {
-            return Err(format!(
-                "building the generator (`cargo build --release -p rbss-codegen` in {}) \
-                 failed:\n{}",
-                self.source.display(),
-                String::from_utf8_lossy(&out.stderr).trim_end()
-            ));
-        }
-        progress(&format!(
-            "generator built in {:.1} s",
-            t0.elapsed().as_secs_f64()
-        ));
-        Ok(())
     }
 }
 
@@ -962,6 +897,7 @@ fn sources_hash(root: &Path) -> Result<[u8; 32], String> {
         "src",
         "runtime",
         "ffi",
+        "robot-lib",
         "codegen/src",
         "expr/src",
         "generated",
@@ -1079,6 +1015,54 @@ fn manifest_string(manifest: &str, key: &str) -> Option<String> {
         .and_then(|(_, v)| v.get_ref().as_str().map(str::to_string))
 }
 
+/// Writes the robot's crate of `model` to `dir`: the generator in this process, or the command
+/// `$RBSS_CODEGEN` names. Errors are the generator's diagnostics (file, line and column).
+fn generate(cache: &Cache, model: &Path, dir: &Path) -> Result<(), String> {
+    if let Some(codegen) = &cache.codegen {
+        let out = Command::new(codegen)
+            .arg("--out")
+            .arg(dir)
+            .arg(model)
+            .output()
+            .map_err(|e| {
+                format!(
+                    "cannot run the generator `{}` (RBSS_CODEGEN): {e}",
+                    codegen.display()
+                )
+            })?;
+        if !out.status.success() {
+            return Err(String::from_utf8_lossy(&out.stderr).trim_end().to_string());
+        }
+        return Ok(());
+    }
+    let source = rbss_codegen::source::read_source(model).map_err(|d| d.render())?;
+    // The crate's Cargo.toml names the runtime by its absolute path (the library crate
+    // includes only its module; the crate stays buildable on its own).
+    let runtime = cache.source.join("runtime");
+    let runtime = runtime.to_string_lossy().replace('\\', "/");
+    let model_path = model.to_string_lossy();
+    // A panic in the generator is a bug of rbss; it ends this run with an error, not the process.
+    let generated = std::panic::catch_unwind(|| {
+        rbss_codegen::generate_with_runtime(
+            &model_path,
+            &source,
+            &rbss_codegen::Options::default(),
+            &runtime,
+            // The progress lines (and warnings) are the generator command's; the library's
+            // build says its own.
+            &mut |_| {},
+        )
+    })
+    .map_err(|_| {
+        format!(
+            "{}: the generator panicked (a bug of rbss-codegen; please report it)",
+            model.display()
+        )
+    })?
+    .map_err(|e| e.to_string().trim_end().to_string())?;
+    rbss_codegen::write_crate(dir, &generated).map_err(|e| e.to_string())
+}
+
 #[allow(clippy::too_many_arguments)]
 fn build_in(
     cache: &Cache,
@@ -1093,24 +1077,8 @@ fn build_in(
 ) -> Result<(), String> {
     let t0 = std::time::Instant::now();
     let robot_dir = tmp.join("robot");
-    cache.ensure_codegen(progress)?;
     progress(&format!("generating {} ...", model.display()));
-    let out = Command::new(&cache.codegen)
-        .arg("--out")
-        .arg(&robot_dir)
-        .arg(model)
-        .output()
-        .map_err(|e| {
-            format!(
-                "cannot run the generator `{}` ({e}): build it (`cargo build --release -p \
-                 rbss-codegen`) or name it with RBSS_CODEGEN",
-                cache.codegen.display()
-            )
-        })?;
-    if !out.status.success() {
-        // The generator's own diagnostics name the file, line and column.
-        return Err(String::from_utf8_lossy(&out.stderr).trim_end().to_string());
-    }
+    generate(cache, model, &robot_dir)?;
     let manifest_text = fs::read_to_string(robot_dir.join("rbss-manifest.toml"))
         .map_err(|e| format!("{}: no manifest: {e}", robot_dir.display()))?;
     let manifest = toml::de::DeTable::parse(&manifest_text)
@@ -1156,76 +1124,29 @@ fn build_in(
             model.display()
         ));
     }
-    let lib_dir = tmp.join("lib");
-    fs::create_dir_all(&lib_dir).map_err(|e| format!("{}: {e}", lib_dir.display()))?;
-    let src = |p: &str| toml_path(&cache.source.join(p));
-    let cargo_toml = format!(
-        "# Written by rbss --model-file: the robot `{name}` ({model}) as a library.\n\
-         [package]\n\
-         name = \"rbss-robot-{name}\"\n\
-         version = \"0.0.0\"\n\
-         edition = \"2024\"\n\
-         publish = false\n\
-         \n\
-         [lib]\n\
-         name = \"rbss_robot_{key}\"\n\
-         path = \"lib.rs\"\n\
-         crate-type = [\"cdylib\"]\n\
-         \n\
-         [dependencies]\n\
-         {name} = {{ path = \"../robot\" }}\n\
-         # Without the feature `robots`: of the command's built-in robots only stewart_6ups\n\
-         # (paper, stress) is compiled in, the others' solvers are not (build.rs).\n\
-         rbss = {{ path = {root}, default-features = false{features} }}\n\
-         rbss-ffi = {{ path = {ffi} }}\n\
-         rbss-runtime = {{ path = {runtime} }}\n\
-         \n\
-         [workspace]\n\
-         \n\
-         # The profile of the rbss workspace (its Cargo.toml).\n\
-         [profile.release]\n\
-         debug = \"line-tables-only\"\n\
-         \n\
-         [profile.release.package.\"*\"]\n\
-         codegen-units = 4\n\
-         \n\
-         # The rbss crates as the rbss workspace compiles them (members: 16 units, not the 4 of\n\
-         # its `\"*\"`; with 4 the 6-UPS's dynamics terms ran 14 % slower, BENCHMARKS.md).\n\
-         [profile.release.package.rbss]\n\
-         codegen-units = 16\n\
-         [profile.release.package.rbss-runtime]\n\
-         codegen-units = 16\n\
-         [profile.release.package.rbss-ffi]\n\
-         codegen-units = 16\n\
-         [profile.release.package.rbss-expr]\n\
-         codegen-units = 16\n\
-         \n\
-         # The library itself without line tables: 0.5 s less of its 6 to 7 s of compile\n\
-         # (6-UPS; BENCHMARKS.md, issue 22); its panics are caught at the C boundary anyway.\n\
-         [profile.release.package.rbss-robot-{name}]\n\
-         debug = false\n",
-        // Quoted and escaped: a path may hold anything but NUL (issue 37).
-        model = toml_str(&inputs.path.to_string_lossy()),
-        root = src(""),
-        ffi = src("ffi"),
-        runtime = src("runtime"),
-        features = match variant {
-            Variant::Plain => "",
-            Variant::Studies => ", features = [\"studies\"]",
-        },
-    );
-    let lib_rs = format!(
-        "//! Written by rbss --model-file: the robot `{name}` behind the C ABI (rbss.h) and the \
-         command.\n\
-         rbss_ffi::export!({name}::{ty}, dynamics);\n\
-         rbss::export_command!({name}::{ty}, \"{key}\");\n"
-    );
-    fs::write(lib_dir.join("Cargo.toml"), cargo_toml).map_err(|e| e.to_string())?;
-    fs::write(lib_dir.join("lib.rs"), lib_rs).map_err(|e| e.to_string())?;
-    // The workspace's versions of every dependency (no resolution, no network).
-    let lock = cache.source.join("Cargo.lock");
-    fs::copy(&lock, lib_dir.join("Cargo.lock"))
-        .map_err(|e| format!("{}: cannot copy: {e}", lock.display()))?;
+    // The file the workspace's library crate (robot-lib/) includes: the robot's module by its
+    // absolute path (a Rust string literal: a path may hold anything but NUL, issue 37).
+    let module_path = robot_dir.join("src").join(format!("{name}.rs"));
+    let module_path = module_path.to_str().ok_or_else(|| {
+        format!(
+            "{}: the cache's path is not UTF-8, which rustc needs to include the robot",
+            module_path.display()
+        )
+    })?;
+    let robot_rs = tmp.join("robot-lib.rs");
+    fs::write(
+        &robot_rs,
+        format!(
+            "// Written by rbss --model-file: the robot `{name}` ({model}) behind the C ABI \
+             (rbss.h) and the command.\n\
+             #[path = {module_path:?}]\n\
+             pub mod {name};\n\
+             ::rbss_ffi::export!({name}::{ty}, dynamics);\n\
+             ::rbss::export_command!({name}::{ty}, \"{key}\");\n",
+            model = inputs.path.display(),
+        ),
+    )
+    .map_err(|e| format!("{}: {e}", robot_rs.display()))?;
 
     progress(&format!(
         "compiling robot `{name}`{} (cargo, in {}) ...",
@@ -1253,10 +1174,15 @@ fn build_in(
         "robot of another model (the build directory is shared)",
         progress,
     )?;
-    let before = artefacts(&cache.target);
-    let mut child = Command::new(&cache.cargo)
-        .args(["build", "--release", "--quiet", "--manifest-path"])
-        .arg(lib_dir.join("Cargo.toml"))
+    let mut cmd = Command::new(&cache.cargo);
+    cmd.args(["build", "--release", "--quiet", "-p", "rbss-robot-lib"]);
+    if variant == Variant::Studies {
+        cmd.args(["--features", "rbss-robot-lib/studies"]);
+    }
+    let mut child = cmd
+        .arg("--manifest-path")
+        .arg(cache.source.join("Cargo.toml"))
+        .env("RBSS_ROBOT_LIB", &robot_rs)
         .env("CARGO_TARGET_DIR", &cache.target)
         .env_remove("CARGO_BUILD_TARGET_DIR")
         .stdout(std::process::Stdio::null())
@@ -1303,11 +1229,26 @@ fn build_in(
         ));
     }
     let built = cache.target.join("release").join(format!(
-        "{}rbss_robot_{key}{}",
+        "{}rbss_robot{}",
         std::env::consts::DLL_PREFIX,
         std::env::consts::DLL_SUFFIX
     ));
     let library = fs::read(&built).map_err(|e| format!("{}: cannot read: {e}", built.display()))?;
+    // The library of this build, not of another cargo build of the workspace's library crate
+    // run in the same directory since (which the build lock does not hold off): it holds the
+    // key its `rbss_cache_key` returns.
+    let key_bytes = format!("{key}\0");
+    if !library
+        .windows(key_bytes.len())
+        .any(|w| w == key_bytes.as_bytes())
+    {
+        return Err(format!(
+            "{}: not the library of robot `{name}` (another cargo build in {} at the same \
+             time?); run again",
+            built.display(),
+            cache.target.display()
+        ));
+    }
     write_synced(&tmp.join(library_file()), &library)?;
     // The stamp last, flushed, then the directory: the entry is complete once it is renamed in.
     let stamp = Stamp {
@@ -1326,27 +1267,9 @@ fn build_in(
     if let Some(parent) = entry.parent() {
         sync_dir(parent);
     }
-    // This build's own objects in cargo's directory are not needed any more (the runtime's
-    // and the dependencies' stay, for the next build).
+    // The copy in cargo's directory is not needed any more (the library crate's objects are
+    // the same files for every model: the next build overwrites them).
     let _ = fs::remove_file(&built);
-    let ours = |n: &str| {
-        n.starts_with(&format!("{name}-"))
-            || n.starts_with(&format!("lib{name}-"))
-            || n.starts_with(&format!("rbss-robot-{name}-"))
-            || n.contains(&format!("rbss_robot_{key}"))
-    };
-    for p in artefacts(&cache.target) {
-        let n = p
-            .file_name()
-            .map_or(String::new(), |n| n.to_string_lossy().into_owned());
-        if ours(&n) && !before.contains(&p) {
-            let _ = if p.is_dir() {
-                fs::remove_dir_all(&p)
-            } else {
-                fs::remove_file(&p)
-            };
-        }
-    }
     drop(build_lock);
     progress(&format!(
         "robot `{name}` compiled in {:.1} s; cached in {}",
@@ -1354,21 +1277,6 @@ fn build_in(
         entry.display()
     ));
     Ok(())
-}
-
-/// The files and directories of cargo's release build directory that are per crate.
-fn artefacts(target: &Path) -> std::collections::HashSet<PathBuf> {
-    let release = target.join("release");
-    let mut out = std::collections::HashSet::new();
-    for d in ["deps", ".fingerprint", "build"] {
-        if let Ok(rd) = fs::read_dir(release.join(d)) {
-            out.extend(rd.flatten().map(|e| e.path()));
-        }
-    }
-    if let Ok(rd) = fs::read_dir(&release) {
-        out.extend(rd.flatten().map(|e| e.path()).filter(|p| p.is_file()));
-    }
-    out
 }
 
 /// One cache entry, as `rbss cache list` shows it.
@@ -1511,11 +1419,6 @@ fn try_entry_lock(robots: &Path, key: &str) -> Option<fs::File> {
         .ok()?;
     f.try_lock().ok()?;
     Some(f)
-}
-
-/// `p` as a TOML basic string.
-fn toml_path(p: &Path) -> String {
-    toml_str(&p.to_string_lossy())
 }
 
 /// `s` as a TOML basic string (control characters escaped).

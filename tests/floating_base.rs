@@ -423,12 +423,6 @@ fn random_state(rng: &mut Rng) -> (Vec<f64>, Vec<f64>) {
 
 fn rbss(cache: &Path, args: &[&str]) -> (bool, String, String) {
     let exe = Path::new(env!("CARGO_BIN_EXE_rbss"));
-    let codegen = exe.with_file_name("rbss-codegen");
-    assert!(
-        codegen.is_file(),
-        "{} is missing: build it with `cargo build --release -p rbss-codegen`",
-        codegen.display()
-    );
     let target = exe.parent().and_then(Path::parent).unwrap();
     let out = Command::new(exe)
         .args(args)

@@ -22,12 +22,6 @@ fn target_dir() -> PathBuf {
 
 /// Runs `rbss args` with the cache in `cache`; (success, stdout, stderr).
 fn rbss(cache: &Path, args: &[&str], env: &[(&str, &str)]) -> (bool, String, String) {
-    let codegen = Path::new(env!("CARGO_BIN_EXE_rbss")).with_file_name("rbss-codegen");
-    assert!(
-        codegen.is_file(),
-        "{} is missing: build it with `cargo build --release -p rbss-codegen`",
-        codegen.display()
-    );
     let mut cmd = Command::new(env!("CARGO_BIN_EXE_rbss"));
     cmd.args(args)
         .env("RBSS_CACHE", cache)
@@ -527,7 +521,13 @@ fn mjcf_include_edits_and_two_directories() {
 
     // The include edited while the robot is generated (a generator that edits it first): an
     // error, nothing cached; the next run builds the edited robot.
+    // (`RBSS_CODEGEN`: a generator command run instead of the one in rbss.)
     let real = Path::new(env!("CARGO_BIN_EXE_rbss")).with_file_name("rbss-codegen");
+    assert!(
+        real.is_file(),
+        "{} is missing: build it with `cargo build --release -p rbss-codegen`",
+        real.display()
+    );
     let wrapper = tmp.path().join("codegen-that-edits.sh");
     std::fs::write(
         &wrapper,

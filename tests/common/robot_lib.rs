@@ -11,12 +11,6 @@ type Handle = *mut c_void;
 /// Builds (or finds in `cache`) the library of `model` with the `rbss` command under test.
 pub fn library(model: &Path, cache: &Path) -> PathBuf {
     let exe = Path::new(env!("CARGO_BIN_EXE_rbss"));
-    let codegen = exe.with_file_name("rbss-codegen");
-    assert!(
-        codegen.is_file(),
-        "{} is missing: build it with `cargo build --release -p rbss-codegen`",
-        codegen.display()
-    );
     let target = exe.parent().and_then(Path::parent).unwrap();
     let out = Command::new(exe)
         .args(["library", "--model-file", model.to_str().unwrap()])
