@@ -5,7 +5,7 @@
     x = robot.ik([0.1, 0, 0.94, 0.1, 0, 0])             # numpy arrays in and out
     xddot, lam = robot.forward_dynamics(x, np.zeros(robot.n), np.zeros(robot.actuated))
 
-Two implementations of one API over the library's C ABI (ffi/include/rbss.h, version 3):
+Two implementations of one API over the library's C ABI (ffi/include/rbss.h, version 4):
 `rbss._native` (python/native: PyO3, compiled once for every robot when the package is installed,
 `pip install ./python`; it loads the library and calls its functions, under 1 us per call over
 the library) when it is importable, else a thin ctypes + numpy layer (about 8 us per call over;
