@@ -197,6 +197,19 @@ _FD_DERIVATIVES = (
 )
 
 
+# inverse_dynamics_derivatives' results, in the order of rbss_inverse_dynamics_derivatives.
+_ID_DERIVATIVES = (
+    "u",
+    "lambda",
+    "du_dx",
+    "du_dxdot",
+    "du_dxddot",
+    "dlambda_dx",
+    "dlambda_dxdot",
+    "dlambda_dxddot",
+)
+
+
 def _shaped(flat, rows, cols):
     """Column-major (rows x cols) matrices, one per row of `flat`, as numpy's (..., rows, cols)
     (a view); cols None: a vector, as it is."""
@@ -549,6 +562,21 @@ class Robot:
             self._invoke(f, *[_ptr(v) for v in arrays])
 
         return dict(zip(_FD_DERIVATIVES, self._shaped_rows(one, ins, shapes)))
+
+    def inverse_dynamics_derivatives(self, x, xdot, xddot):
+        """Inverse dynamics at the motion (x, xdot, xddot) and its derivatives
+        (rbss_inverse_dynamics_derivatives): a dict of "u" (actuated,), "lambda" (m,), "du_dx",
+        "du_dxdot", "du_dxddot" (actuated, n), "dlambda_dx", "dlambda_dxdot", "dlambda_dxddot"
+        (m, n); (k, n) inputs give each a leading axis k."""
+        n, m, a = self.n, self.m, self.actuated
+        ins = [self._arr(x, n, "x"), self._arr(xdot, n, "xdot"), self._arr(xddot, n, "xddot")]
+        shapes = [(a, None), (m, None), (a, n), (a, n), (a, n), (m, n), (m, n), (m, n)]
+        f = self._lib.rbss_inverse_dynamics_derivatives
+
+        def one(*arrays):
+            self._invoke(f, *[_ptr(v) for v in arrays])
+
+        return dict(zip(_ID_DERIVATIVES, self._shaped_rows(one, ins, shapes)))
 
     def linearize(self, x, xdot, u, coordinates="outputs"):
         """(A, B) of d/dt [y; ydot] = A [y; ydot] + B U, forward dynamics linearised on the
