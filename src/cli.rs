@@ -225,6 +225,23 @@ pub enum Cmd {
         #[command(flatten)]
         check: StateCheckArgs,
     },
+    /// The derivatives of inverse dynamics at a motion: reads {"X":[..n..],"Xdot":[..n..],
+    /// "Xddot":[..n..]} and prints JSON: "U" (k) and "lambda" (m) of inverse dynamics there
+    /// (`rbss inverse-dynamics`'s equations, the applied forces held) and their derivatives
+    /// dU/dX, dU/dXdot, dU/dXddot (k x n), dlambda/dX, dlambda/dXdot, dlambda/dXddot (m x n),
+    /// arrays of rows, with "method" and "cond" of the solve. X and Xdot are checked against
+    /// the constraints as by `rbss fd` (or projected with --project; Xddot is used as given).
+    /// A singular [S | Gᵀ] (a parallel singularity) is an error. Conventions as
+    /// `rbss fd --help`.
+    IdDerivatives {
+        #[command(flatten)]
+        robot: RobotArg,
+        /// The JSON file of the motion.
+        #[arg(long)]
+        state: String,
+        #[command(flatten)]
+        check: StateCheckArgs,
+    },
     /// Forward dynamics in time from a state (the JSON file `rbss fd` reads), under its "U"
     /// (constant; zero when absent) or "U_table":[[t,U1..Uk],..] (linear between rows, held
     /// beyond). Writes DIR/simulate.csv (t, the coordinates, their rates NAME_dot, T, Pi,
@@ -794,6 +811,11 @@ pub fn run_with_model<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>
             out!(stdout, "{json}");
             Ok(())
         }
+        Cmd::IdDerivatives { state, check, .. } => {
+            let json = crate::simulate::id_derivatives(&model, &state, &check.check()?)?;
+            out!(stdout, "{json}");
+            Ok(())
+        }
         Cmd::Fd {
             state,
             check,
@@ -939,6 +961,7 @@ impl Cmd {
             | Cmd::Eval { robot, .. }
             | Cmd::Fd { robot, .. }
             | Cmd::Linearize { robot, .. }
+            | Cmd::IdDerivatives { robot, .. }
             | Cmd::Simulate { robot, .. } => Some(robot),
             #[cfg(feature = "studies")]
             Cmd::Bench(cmd) => Some(cmd.robot()),

@@ -244,20 +244,47 @@ impl NamedMode {
     }
 }
 
+/// Where a position solve of the command starts, for the advice of its errors: `rbss fk` moves
+/// its start with `--near POSE`; `rbss ik` (and the inverse kinematics of `fk --near`) always
+/// starts from the home assembly, so its advice names the options it has and the library's
+/// start (`rbss_ik`'s `x_start`, Python's `robot.ik(pose, x_start=...)`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Start {
+    /// The start can be moved with `--near POSE` (`rbss fk`).
+    Near,
+    /// The start is the home assembly (`rbss ik`).
+    Home,
+}
+
+/// Where an inverse kinematics can start elsewhere than the home assembly: the library.
+const LIBRARY_START: &str =
+    "the library's `rbss_ik` (its `x_start`) or Python's `robot.ik(pose, x_start=...)`";
+
 /// A solver error in the user's terms: an unreachable pose names the leg that cannot close; a
 /// singular or mode-changing block names its constraints; a spurious root names the loop
-/// component; a stalled continuation says what to try.
+/// component; a stalled continuation says what to try, with the options the command has
+/// (`start`).
 pub fn explain<K: Kernels<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     e: &SolverError,
+    start: Start,
 ) -> String {
     let s = model.structure();
+    let nearer = match start {
+        Start::Near => "start nearer (--near POSE)".to_string(),
+        Start::Home => {
+            format!(
+                "start nearer through {LIBRARY_START} (the command's inverse kinematics starts \
+                 from the home assembly)"
+            )
+        }
+    };
     match *e {
         SolverError::SpuriousRoot { check, residual } => format!(
             "converged to a spurious root: loop component `{}` (left out of the equations solved) \
              is {residual:.3e} from closing, so the solution closes the loops' solved components \
-             but is a mirror of the configuration asked for; start nearer (--near) or use the \
-             default continuation",
+             but is a mirror of the configuration asked for; use the default continuation \
+             (without --direct), or {nearer}",
             model
                 .kernels()
                 .closure_checks()
@@ -284,18 +311,18 @@ pub fn explain<K: Kernels<N, M>, const N: usize, const M: usize>(
             };
             format!(
                 "{place}: the sign of det of {what} changed from {start:+} to {found:+}; pass \
-                 --allow-mode-change to accept another mode, or start nearer the wanted one with \
-                 --near POSE"
+                 --allow-mode-change to accept another mode, or, in the wanted mode, {nearer}"
             )
         }
         SolverError::PathStalled { t, residual } => format!(
             "did not converge from this start: the continuation stalled at {t:.4} of the way \
              (max |f| = {residual:.1e}), where a singularity or the limit of the reach lies on the \
-             straight path from the start; start nearer (--near POSE)"
+             straight path from the start; try --direct (one Newton solve, not along the path), \
+             or {nearer}"
         ),
         SolverError::NotConverged { .. } => format!(
-            "did not converge from this start ({e}); start nearer (--near POSE), or drop --direct \
-             to walk there by continuation"
+            "did not converge from this start ({e}); drop --direct to walk there by \
+             continuation, or {nearer}"
         ),
         _ => explain_ik_error(s, e),
     }
@@ -402,10 +429,19 @@ fn position<K: Kernels<N, M>, const N: usize, const M: usize>(
             ModePart::Block(b) => block_description(s, b),
             ModePart::Jp => "J_p".to_string(),
         };
+        let advice = if forward {
+            "start nearer the named mode (--near POSE), or solve with --direct \
+             --allow-mode-change from a start in it"
+                .to_string()
+        } else {
+            format!(
+                "the command's inverse kinematics starts from the home assembly; start from an \
+                 assembly in the named mode with {LIBRARY_START}"
+            )
+        };
         return Err(Fail::Text(format!(
             "found a solution in mode {} (max |f| = {:.1e}), not the named --mode {}: the sign of \
-             det of {what} is {got:+}, not {want:+}; start nearer the named mode (--near POSE), or \
-             solve with --direct --allow-mode-change from a start in it",
+             det of {what} is {got:+}, not {want:+}; {advice}",
             sig.text(),
             out.2,
             named.text()
@@ -526,7 +562,10 @@ pub fn ik<K: Kernels<N, M>, const N: usize, const M: usize>(
         .map_err(|e| match e {
             Fail::Solver(e) => {
                 let e = honest_reach(model, &pose, e);
-                format!("inverse kinematics failed: {}", explain(model, &e))
+                format!(
+                    "inverse kinematics failed: {}",
+                    explain(model, &e, Start::Home)
+                )
             }
             Fail::Text(t) => format!("inverse kinematics {t}"),
         })?;
@@ -643,7 +682,10 @@ pub fn fk<K: Kernels<N, M>, const N: usize, const M: usize>(
         };
         inverse_kinematics_path(model, &mut data, &pose, &opts).map_err(|e| {
             let e = honest_reach(model, &pose, e);
-            format!("--near: inverse kinematics failed: {}", explain(model, &e))
+            format!(
+                "--near: inverse kinematics failed: {}",
+                explain(model, &e, Start::Home)
+            )
         })?;
     }
     let mut start = data.x;
@@ -652,7 +694,12 @@ pub fn fk<K: Kernels<N, M>, const N: usize, const M: usize>(
     }
     let (method, iterations, residual, cond, mode) = position(model, &mut data, &q, true, how)
         .map_err(|e| match e {
-            Fail::Solver(e) => format!("forward kinematics failed: {}", explain(model, &e)),
+            Fail::Solver(e) => {
+                format!(
+                    "forward kinematics failed: {}",
+                    explain(model, &e, Start::Near)
+                )
+            }
             Fail::Text(t) => format!("forward kinematics {t}"),
         })?;
     let (mut change, mut moved) = (0.0_f64, s.passive.first().copied().unwrap_or(0));

@@ -1,5 +1,6 @@
-//! `rbss fd` (forward dynamics at one state) and `rbss simulate` (forward dynamics in time under
-//! a given control, or none), for any robot.
+//! `rbss fd` (forward dynamics at one state), `rbss linearize` and `rbss id-derivatives` (the
+//! derivatives of forward and inverse dynamics at one state) and `rbss simulate` (forward
+//! dynamics in time under a given control, or none), for any robot.
 //!
 //! The state file (JSON) is the one `rbss eval` reads, for one state:
 //!
@@ -590,6 +591,113 @@ pub fn linearize<K: Dynamics<N, M>, const N: usize, const M: usize>(
         dlambda_dx: rows_of(&fd.dlambda_dx, M, N),
         dlambda_dxdot: rows_of(&fd.dlambda_dxdot, M, N),
         dlambda_du: rows_of(&fd.dlambda_du, M, k),
+        state_residual,
+        projected,
+    };
+    serde_json::to_string(&out).map_err(|e| format!("cannot write JSON: {e}"))
+}
+
+/// The motion file of `rbss id-derivatives`.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct MotionIn {
+    #[serde(rename = "X")]
+    x: Vec<f64>,
+    #[serde(rename = "Xdot")]
+    xdot: Vec<f64>,
+    #[serde(rename = "Xddot")]
+    xddot: Vec<f64>,
+}
+
+/// The JSON of `rbss id-derivatives` (see [`id_derivatives`]): matrices as arrays of rows.
+#[derive(Serialize)]
+struct IdDerivativesOut {
+    #[serde(rename = "U")]
+    u: Vec<f64>,
+    lambda: Vec<f64>,
+    #[serde(rename = "dU_dX")]
+    du_dx: Vec<Vec<f64>>,
+    #[serde(rename = "dU_dXdot")]
+    du_dxdot: Vec<Vec<f64>>,
+    #[serde(rename = "dU_dXddot")]
+    du_dxddot: Vec<Vec<f64>>,
+    #[serde(rename = "dlambda_dX")]
+    dlambda_dx: Vec<Vec<f64>>,
+    #[serde(rename = "dlambda_dXdot")]
+    dlambda_dxdot: Vec<Vec<f64>>,
+    #[serde(rename = "dlambda_dXddot")]
+    dlambda_dxddot: Vec<Vec<f64>>,
+    /// `"block_elimination"` or `"dense_lu"`.
+    method: String,
+    /// The condition estimate of the solve (the reduced system's, or `[S | Gᵀ]`'s).
+    cond: f64,
+    /// The given state's consistency, `[max |f(X)|, max |G Ẋ|]` (before any projection).
+    state_residual: [f64; 2],
+    /// With `--project`: how far the state moved, `[max |ΔX|, max |ΔẊ|]`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    projected: Option<[f64; 2]>,
+}
+
+/// `rbss id-derivatives --model NAME --state FILE`: inverse dynamics at the motion of `path`
+/// (`{"X", "Xdot", "Xddot"}`) and its derivatives with respect to `X`, `Xdot` and `Xddot` (the
+/// runtime's [`rbss_runtime::inverse_dynamics_derivatives`], the applied forces held), as JSON.
+/// `X` and `Xdot` are checked (or projected) as `rbss fd` does; `Xddot` is used as given (the
+/// derivatives hold off the acceleration constraint too). A singular `[S | Gᵀ]` is an error.
+pub fn id_derivatives<K: Dynamics<N, M>, const N: usize, const M: usize>(
+    model: &Model<K, N, M>,
+    path: &str,
+    check: &StateCheck,
+) -> Result<String, String> {
+    let s = model.structure();
+    let text = crate::read_input(Path::new(path))?;
+    let st: MotionIn =
+        serde_json::from_str(&text).map_err(|e| format!("{path}: bad motion file: {e}"))?;
+    for (what, v) in [("X", &st.x), ("Xdot", &st.xdot), ("Xddot", &st.xddot)] {
+        if v.len() != N {
+            return Err(format!(
+                "{path}: \"{what}\" has {} values, the robot has {N} coordinates",
+                v.len()
+            ));
+        }
+        if let Some(e) = v.iter().find(|e| !e.is_finite()) {
+            return Err(format!("{path}: \"{what}\": {e} is not a finite number"));
+        }
+    }
+    let mut data = Data::new(model);
+    data.x.copy_from_slice(&st.x);
+    data.xdot.copy_from_slice(&st.xdot);
+    data.xddot.copy_from_slice(&st.xddot);
+    let state_residual = consistency(model, &data.x, &data.xdot);
+    check_state(path, state_residual, check)?;
+    let projected = if check.project {
+        let (x0, v0) = (data.x, data.xdot);
+        rbss_runtime::project_position(model, &mut data)
+            .map_err(|e| format!("{path}: cannot project the state: {e}"))?;
+        rbss_runtime::project_velocity(model, &mut data)
+            .map_err(|e| format!("{path}: cannot project the state: {e}"))?;
+        Some([max_diff(&data.x, &x0), max_diff(&data.xdot, &v0)])
+    } else {
+        None
+    };
+    let mut d = rbss_runtime::InverseDynamicsDerivatives::new();
+    rbss_runtime::inverse_dynamics_derivatives(model, &mut data, &mut d, None)
+        .map_err(|e| format!("{path}: inverse-dynamics derivatives: {e}"))?;
+    let k = s.actuated.len();
+    let out = IdDerivativesOut {
+        u: data.u[..k].to_vec(),
+        lambda: data.lambda.to_vec(),
+        du_dx: rows_of(&d.du_dx, k, N),
+        du_dxdot: rows_of(&d.du_dxdot, k, N),
+        du_dxddot: rows_of(&d.du_dxddot, k, N),
+        dlambda_dx: rows_of(&d.dlambda_dx, M, N),
+        dlambda_dxdot: rows_of(&d.dlambda_dxdot, M, N),
+        dlambda_dxddot: rows_of(&d.dlambda_dxddot, M, N),
+        method: match d.method {
+            rbss_runtime::DynamicsMethod::BlockElimination => "block_elimination".into(),
+            rbss_runtime::DynamicsMethod::DenseLu => "dense_lu".into(),
+            other => format!("{other:?}"),
+        },
+        cond: d.cond,
         state_residual,
         projected,
     };

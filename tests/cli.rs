@@ -874,3 +874,45 @@ fn eval_reports_a_failed_state_and_keeps_the_others() {
         "rbss fd and rbss eval at the same state"
     );
 }
+
+/// The advice of a failed position solve names the options the command has: `rbss ik` starts
+/// from the home assembly and has no `--near` (only `rbss fk` has), so its errors point to
+/// `--allow-mode-change` and the library's start (`rbss_ik`'s `x_start`, Python's
+/// `robot.ik(pose, x_start=...)`), never to `--near`; `rbss fk`'s still name `--near POSE`.
+#[test]
+fn ik_advice_names_options_that_exist() {
+    // One Newton solve from home to (0.25, 0.15) lands in another mode of the right leg.
+    let (ok, _, stderr) = rbss(&[
+        "ik",
+        "--model",
+        "five_bar",
+        "--pose",
+        "0.25,0.15",
+        "--direct",
+    ]);
+    assert!(!ok);
+    assert!(
+        stderr.contains("another assembly mode")
+            && stderr.contains("--allow-mode-change")
+            && stderr.contains("robot.ik(pose, x_start=...)"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("--near"), "{stderr}");
+    // A named mode the home's continuation does not reach.
+    let (ok, _, stderr) = rbss(&[
+        "ik", "--model", "five_bar", "--pose", "0,0.3", "--mode", "+?/?",
+    ]);
+    assert!(!ok);
+    assert!(
+        stderr.contains("not the named --mode +?/?")
+            && stderr.contains("`rbss_ik` (its `x_start`)"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("--near"), "{stderr}");
+    // `rbss fk` can move its start: its advice names --near.
+    let (ok, _, stderr) = rbss(&[
+        "fk", "--model", "five_bar", "--q", "0.3,0.3", "--mode", "-+/-",
+    ]);
+    assert!(!ok);
+    assert!(stderr.contains("--near POSE"), "{stderr}");
+}

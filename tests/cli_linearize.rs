@@ -1,6 +1,8 @@
 //! `rbss linearize`: the JSON against the runtime's `linearize` in the same process (the same
 //! numbers after the JSON round trip), `A`'s and `B`'s layout, both choices of coordinates, and
-//! the refusals (an inconsistent state, a bad `--coordinates`).
+//! the refusals (an inconsistent state, a bad `--coordinates`). `rbss id-derivatives`: the JSON
+//! against the runtime's `inverse_dynamics_derivatives` (the same numbers) and against central
+//! differences of the runtime's `inverse_dynamics`, and its refusals.
 
 // The checks compare a JSON matrix (rows of rows) with nalgebra's entry by entry: index loops
 // over both are the plain form.
@@ -9,7 +11,10 @@
 mod common;
 
 use common::rbss;
-use rbss_runtime::{Coordinates, Data, Linearization, Model, inverse_velocity, linearize};
+use rbss_runtime::{
+    Coordinates, Data, InverseDynamicsDerivatives, Linearization, Model, inverse_dynamics,
+    inverse_dynamics_derivatives, inverse_velocity, linearize,
+};
 
 fn matrix(v: &serde_json::Value, what: &str) -> Vec<Vec<f64>> {
     v[what]
@@ -190,4 +195,192 @@ fn refusals() {
     ]);
     assert!(!ok);
     assert!(stderr.contains("platform"), "{stderr}");
+}
+
+/// `rbss id-derivatives` at a moving state of `model` with the acceleration `xddot`: the JSON's
+/// numbers are the runtime's `inverse_dynamics_derivatives` (exactly, after the JSON round
+/// trip) and match central differences of the runtime's `inverse_dynamics` (relative to each
+/// matrix's largest entry, <= 1e-6); returns the worst relative difference.
+fn check_id<K: rbss_runtime::Dynamics<N, M>, const N: usize, const M: usize>(
+    name: &str,
+    model: &Model<K, N, M>,
+    rates: &[f64],
+    xddot: &[f64; N],
+) -> f64 {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut data = Data::new(model);
+    inverse_velocity(model, &mut data, rates).unwrap();
+    data.xddot = *xddot;
+    let (x, xdot) = (data.x, data.xdot);
+    let motion =
+        serde_json::json!({"X": x.to_vec(), "Xdot": xdot.to_vec(), "Xddot": xddot.to_vec()});
+    let path = tmp.path().join("motion.json");
+    std::fs::write(&path, motion.to_string()).unwrap();
+    let (ok, stdout, stderr) = rbss(&[
+        "id-derivatives",
+        "--model",
+        name,
+        "--state",
+        path.to_str().unwrap(),
+    ]);
+    assert!(ok, "rbss id-derivatives {name} failed: {stderr}");
+    let v: serde_json::Value = serde_json::from_str(&stdout).expect("stdout is JSON");
+    let mut d = InverseDynamicsDerivatives::new();
+    inverse_dynamics_derivatives(model, &mut data, &mut d, None).unwrap();
+    let k = model.structure().actuated.len();
+    let vector = |what: &str| -> Vec<f64> {
+        v[what]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect()
+    };
+    assert_eq!(vector("U"), data.u[..k].to_vec());
+    assert_eq!(vector("lambda"), data.lambda.to_vec());
+    assert_eq!(v["method"], "block_elimination", "{name}");
+    let got_u = [
+        matrix(&v, "dU_dX"),
+        matrix(&v, "dU_dXdot"),
+        matrix(&v, "dU_dXddot"),
+    ];
+    let got_l = [
+        matrix(&v, "dlambda_dX"),
+        matrix(&v, "dlambda_dXdot"),
+        matrix(&v, "dlambda_dXddot"),
+    ];
+    let want_u = [&d.du_dx, &d.du_dxdot, &d.du_dxddot];
+    let want_l = [&d.dlambda_dx, &d.dlambda_dxdot, &d.dlambda_dxddot];
+    for w in 0..3 {
+        assert_eq!((got_u[w].len(), got_u[w][0].len()), (k, N));
+        assert_eq!(got_l[w].len(), M);
+        for j in 0..N {
+            for i in 0..k {
+                assert_eq!(
+                    got_u[w][i][j],
+                    want_u[w][(i, j)],
+                    "{name} dU {w} ({i}, {j})"
+                );
+            }
+            for i in 0..M {
+                assert_eq!(
+                    got_l[w][i][j],
+                    want_l[w][(i, j)],
+                    "{name} dlambda {w} ({i}, {j})"
+                );
+            }
+        }
+    }
+    // Central differences of inverse dynamics, a step per entry.
+    let id = |p: &[[f64; N]; 3]| {
+        let mut e = Data::new(model);
+        (e.x, e.xdot, e.xddot) = (p[0], p[1], p[2]);
+        inverse_dynamics(model, &mut e, None).unwrap();
+        (e.u, e.lambda)
+    };
+    let mut worst = 0.0_f64;
+    for w in 0..3 {
+        let (mut num_u, mut num_l) = (vec![vec![0.0; N]; k], vec![vec![0.0; N]; M]);
+        for j in 0..N {
+            let base = [x, xdot, *xddot];
+            let h = f64::EPSILON.cbrt() * base[w][j].abs().max(1.0);
+            let (mut p, mut q) = (base, base);
+            p[w][j] += h;
+            q[w][j] -= h;
+            let ((up, lp), (uq, lq)) = (id(&p), id(&q));
+            let step = p[w][j] - q[w][j];
+            for i in 0..k {
+                num_u[i][j] = (up[i] - uq[i]) / step;
+            }
+            for i in 0..M {
+                num_l[i][j] = (lp[i] - lq[i]) / step;
+            }
+        }
+        for (got, num) in [(&got_u[w], &num_u), (&got_l[w], &num_l)] {
+            let scale = num.iter().flatten().fold(0.0_f64, |m, e| m.max(e.abs()));
+            if scale == 0.0 {
+                continue;
+            }
+            for (g, n) in got.iter().flatten().zip(num.iter().flatten()) {
+                worst = worst.max((g - n).abs() / scale);
+            }
+        }
+    }
+    assert!(
+        worst <= 1e-6,
+        "{name}: against central differences {worst:e}"
+    );
+    worst
+}
+
+#[test]
+fn id_derivatives_match_the_runtime_and_central_differences() {
+    let xddot: [f64; five_bar::N] = std::array::from_fn(|i| 0.4 - 0.15 * i as f64);
+    let w5 = check_id(
+        "five_bar",
+        &Model::new(five_bar::FiveBar::default()),
+        &[0.1, -0.2],
+        &xddot,
+    );
+    let xddot: [f64; stewart_6ups::N] = std::array::from_fn(|i| 0.2 * ((i as f64) * 0.7).sin());
+    let w6 = check_id(
+        "stewart_6ups",
+        &Model::new(stewart_6ups::Stewart6Ups::default()),
+        &[0.01, -0.02, 0.03, 0.01, 0.02, -0.01],
+        &xddot,
+    );
+    eprintln!("id-derivatives vs central differences: five_bar {w5:.1e}, stewart_6ups {w6:.1e}");
+}
+
+#[test]
+fn id_derivatives_refusals() {
+    let tmp = tempfile::tempdir().unwrap();
+    let home: Vec<f64> = five_bar::STRUCTURE.home.to_vec();
+    let n = home.len();
+    let write = |name: &str, v: serde_json::Value| {
+        let p = tmp.path().join(name);
+        std::fs::write(&p, v.to_string()).unwrap();
+        p.to_str().unwrap().to_string()
+    };
+    let run = |path: &str, project: bool| {
+        let mut args = vec!["id-derivatives", "--model", "five_bar", "--state", path];
+        if project {
+            args.push("--project");
+        }
+        rbss(&args)
+    };
+    // No acceleration: the file names what is missing.
+    let p = write(
+        "no_xddot.json",
+        serde_json::json!({"X": home, "Xdot": vec![0.0; n]}),
+    );
+    let (ok, _, stderr) = run(&p, false);
+    assert!(!ok && stderr.contains("Xddot"), "{stderr}");
+    // A wrong length, a U that belongs to `rbss fd`'s file.
+    let p = write(
+        "short.json",
+        serde_json::json!({"X": home, "Xdot": vec![0.0; n], "Xddot": vec![0.0; n - 1]}),
+    );
+    let (ok, _, stderr) = run(&p, false);
+    assert!(
+        !ok && stderr.contains(&format!("\"Xddot\" has {} values", n - 1)),
+        "{stderr}"
+    );
+    let p = write(
+        "with_u.json",
+        serde_json::json!({"X": home, "Xdot": vec![0.0; n], "Xddot": vec![0.0; n], "U": [1.0, 2.0]}),
+    );
+    let (ok, _, stderr) = run(&p, false);
+    assert!(!ok && stderr.contains("unknown field `U`"), "{stderr}");
+    // An inconsistent velocity: refused as by `rbss fd`, accepted after projection.
+    let p = write(
+        "bad.json",
+        serde_json::json!({"X": home, "Xdot": vec![1.0; n], "Xddot": vec![0.0; n]}),
+    );
+    let (ok, _, stderr) = run(&p, false);
+    assert!(!ok && stderr.contains("not consistent"), "{stderr}");
+    let (ok, stdout, stderr) = run(&p, true);
+    assert!(ok, "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert!(v["projected"][1].as_f64().unwrap() > 0.1);
 }

@@ -207,6 +207,31 @@ fn fresh_cached_stale_and_corrupt_cache() {
     assert!(from_file.contains("not consistent"), "{from_file}");
     assert_eq!(from_file, builtin);
 
+    // `rbss id-derivatives --model-file`: the compiled-in robot's JSON (U, lambda, the six
+    // matrices) at a motion with an acceleration.
+    let motion = tmp.path().join("motion.json");
+    let xddot: Vec<f64> = (0..d.x.len()).map(|i| 0.3 - 0.1 * i as f64).collect();
+    std::fs::write(
+        &motion,
+        serde_json::json!({"X": d.x.to_vec(), "Xdot": d.xdot.to_vec(), "Xddot": xddot}).to_string(),
+    )
+    .unwrap();
+    let motion_arg = motion.to_str().unwrap();
+    let run = |robot: [&str; 2]| {
+        rbss(
+            &cache,
+            &["id-derivatives", robot[0], robot[1], "--state", motion_arg],
+            &[],
+        )
+    };
+    let (ok, from_file, stderr) = run(["--model-file", model_arg]);
+    assert!(ok, "{stderr}");
+    let (ok, builtin, stderr) = run(["--model", "five_bar"]);
+    assert!(ok, "{stderr}");
+    assert_eq!(from_file, builtin, "id-derivatives");
+    let v: serde_json::Value = serde_json::from_str(&from_file).unwrap();
+    assert_eq!(v["dU_dXddot"].as_array().unwrap().len(), 2, "k rows");
+
     // Stale: the model edited (l2 0.25 -> 0.26): a new entry, whose answer is the closed
     // form's for the new length (and differs from the old one's).
     let edited = source.replace("l2 = { value = 0.25,", "l2 = { value = 0.26,");

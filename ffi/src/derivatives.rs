@@ -1,14 +1,16 @@
-//! The derivative functions of a robot with dynamics (issue 36): forward dynamics' derivatives,
-//! the state-space linearisation on the constraint manifold and the Jacobians of one discrete
-//! step, over the runtime's `forward_dynamics_derivatives`, `linearize`,
-//! `rk4_step_derivatives` and `semi_implicit_euler_step_derivatives`.
+//! The derivative functions of a robot with dynamics (issue 36): forward and inverse dynamics'
+//! derivatives, the state-space linearisation on the constraint manifold and the Jacobians of
+//! one discrete step, over the runtime's `forward_dynamics_derivatives`,
+//! `inverse_dynamics_derivatives`, `linearize`, `rk4_step_derivatives` and
+//! `semi_implicit_euler_step_derivatives`.
 //!
 //! Their buffers ([`Workspace`]) are made once per handle, by the first call of one of them;
 //! later calls allocate nothing for them. Matrices are written column-major (`rbss.h`'s
 //! convention), every output only on success: the pointers are checked before anything runs.
 
 use rbss_runtime::{
-    Coordinates, ForwardDynamicsDerivatives, Linearization, SolverError, StepDerivatives,
+    Coordinates, ForwardDynamicsDerivatives, InverseDynamicsDerivatives, Linearization,
+    SolverError, StepDerivatives,
 };
 
 use super::dynamics::STATE_TOL;
@@ -20,6 +22,7 @@ use rbss_abi::{
 /// The buffers of the derivative functions of one handle.
 pub struct Workspace<const N: usize, const M: usize> {
     derivatives: ForwardDynamicsDerivatives<N, M>,
+    inverse: InverseDynamicsDerivatives<N, M>,
     linearization: Linearization<N, M>,
     step: StepDerivatives<N, M>,
     /// `A` and `B` row-major (`Linearization::state_space`), before the transposition.
@@ -27,6 +30,8 @@ pub struct Workspace<const N: usize, const M: usize> {
     b: Vec<f64>,
     /// `A` or `B` column-major, as written.
     t: Vec<f64>,
+    /// The first `actuated` rows of an N × N matrix, column-major (`∂U/∂(X, Ẋ, Ẍ)`).
+    rows: Vec<f64>,
 }
 
 impl<const N: usize, const M: usize> Workspace<N, M> {
@@ -36,11 +41,13 @@ impl<const N: usize, const M: usize> Workspace<N, M> {
         let w = 2 * N.saturating_sub(M);
         Self {
             derivatives: ForwardDynamicsDerivatives::new(),
+            inverse: InverseDynamicsDerivatives::new(),
             linearization: Linearization::new(),
             step: StepDerivatives::new(),
             a: vec![0.0; w * w],
             b: vec![0.0; w * N],
             t: vec![0.0; w * w.max(N)],
+            rows: vec![0.0; N * N],
         }
     }
 }
@@ -64,15 +71,6 @@ fn derivative_error(e: SolverError) -> Failure {
         _ => RBSS_ERR_SOLVER,
     };
     (code, e.to_string())
-}
-
-/// [`RBSS_ERR_ARGUMENT`] for the first null output: checked before anything is computed, so
-/// that a failure writes nothing.
-fn outputs_given(outputs: &[(*mut f64, &str)]) -> Result<(), Failure> {
-    match outputs.iter().find(|(p, _)| p.is_null()) {
-        Some((_, what)) => Err((RBSS_ERR_ARGUMENT, format!("`{what}` is a null pointer"))),
-        None => Ok(()),
-    }
 }
 
 /// The actuated forces `u` (`k <= N` of them, finite) into the first `k` entries of an array:
@@ -167,6 +165,75 @@ pub unsafe fn forward_dynamics_derivatives<K: Dynamics<N, M>, const N: usize, co
             write(dlambda_dx, d.dlambda_dx.as_slice(), "dlambda_dx")?;
             write(dlambda_dxdot, d.dlambda_dxdot.as_slice(), "dlambda_dxdot")?;
             write(dlambda_du, &d.dlambda_du.as_slice()[..M * k], "dlambda_du")
+        })
+    }
+}
+
+/// `rbss_inverse_dynamics_derivatives(h, x, xdot, xddot, u, lambda, du_dx, du_dxdot, du_dxddot,
+/// dlambda_dx, dlambda_dxdot, dlambda_dxddot)`: inverse dynamics at `(x, xdot, xddot)` (`u`,
+/// `lambda` as `rbss_inverse_dynamics`) and its derivatives with respect to `X`, `Xdot` and
+/// `Xddot` (the runtime's `inverse_dynamics_derivatives`), column-major: `dU/d*` actuated × n,
+/// `dlambda/d*` m × n.
+///
+/// # Safety
+/// See [`kinematics`]; every array holds the length of `rbss.h`.
+#[allow(clippy::too_many_arguments)]
+pub unsafe fn inverse_dynamics_derivatives<K: Dynamics<N, M>, const N: usize, const M: usize>(
+    h: *mut Handle<K, N, M>,
+    x: *const f64,
+    xdot: *const f64,
+    xddot: *const f64,
+    u: *mut f64,
+    lambda: *mut f64,
+    du_dx: *mut f64,
+    du_dxdot: *mut f64,
+    du_dxddot: *mut f64,
+    dlambda_dx: *mut f64,
+    dlambda_dxdot: *mut f64,
+    dlambda_dxddot: *mut f64,
+) -> c_int {
+    // SAFETY: the caller's contract.
+    unsafe {
+        call(h, |h| {
+            let outs = [
+                (u, "u"),
+                (lambda, "lambda"),
+                (du_dx, "du_dx"),
+                (du_dxdot, "du_dxdot"),
+                (du_dxddot, "du_dxddot"),
+                (dlambda_dx, "dlambda_dx"),
+                (dlambda_dxdot, "dlambda_dxdot"),
+                (dlambda_dxddot, "dlambda_dxddot"),
+            ];
+            outputs_given(&outs)?;
+            read_state(h, x, xdot)?;
+            h.data.xddot = read_n(xddot, "xddot")?;
+            let k = h.actuated();
+            let ws = workspace(&mut h.derivatives);
+            let d = &mut ws.inverse;
+            rbss_runtime::inverse_dynamics_derivatives(&h.model, &mut h.data, d, None)
+                .map_err(derivative_error)?;
+            write(u, &h.data.u[..k], "u")?;
+            write(lambda, &h.data.lambda, "lambda")?;
+            // The first `k` rows of the N × N storage (column-major), k × N column-major.
+            let rows = &mut ws.rows[..k * N];
+            for (m, p, what) in [
+                (&d.du_dx, du_dx, "du_dx"),
+                (&d.du_dxdot, du_dxdot, "du_dxdot"),
+                (&d.du_dxddot, du_dxddot, "du_dxddot"),
+            ] {
+                for j in 0..N {
+                    rows[j * k..(j + 1) * k].copy_from_slice(&m.as_slice()[j * N..j * N + k]);
+                }
+                write(p, rows, what)?;
+            }
+            write(dlambda_dx, d.dlambda_dx.as_slice(), "dlambda_dx")?;
+            write(dlambda_dxdot, d.dlambda_dxdot.as_slice(), "dlambda_dxdot")?;
+            write(
+                dlambda_dxddot,
+                d.dlambda_dxddot.as_slice(),
+                "dlambda_dxddot",
+            )
         })
     }
 }

@@ -18,6 +18,7 @@ pub unsafe fn inverse_dynamics<K: Dynamics<N, M>, const N: usize, const M: usize
     // SAFETY: the caller's contract.
     unsafe {
         call(h, |h| {
+            outputs_given(&[(u, "u"), (lambda, "lambda")])?;
             h.data.x = read_n(x, "x")?;
             h.data.xdot = read_n(xdot, "xdot")?;
             h.data.xddot = read_n(xddot, "xddot")?;
@@ -44,6 +45,7 @@ pub unsafe fn forward_dynamics<K: Dynamics<N, M>, const N: usize, const M: usize
     // SAFETY: the caller's contract.
     unsafe {
         call(h, |h| {
+            outputs_given(&[(xddot, "xddot"), (lambda, "lambda")])?;
             h.data.x = read_n(x, "x")?;
             h.data.xdot = read_n(xdot, "xdot")?;
             let u = read(u, h.actuated(), "u")?;
@@ -74,6 +76,11 @@ pub unsafe fn forward_dynamics_batch<K: Dynamics<N, M>, const N: usize, const M:
     // SAFETY: the caller's contract.
     unsafe {
         call(h, |h| {
+            // A null output fails before any state is written (a failed state still leaves
+            // the states before it written, as documented).
+            if count > 0 {
+                outputs_given(&[(xddot, "xddot"), (lambda, "lambda")])?;
+            }
             let k = h.actuated();
             for i in 0..count {
                 let at = |e: Failure| (e.0, format!("state {i}: {}", e.1));
@@ -155,9 +162,6 @@ pub unsafe fn simulate_checked<K: Dynamics<N, M>, const N: usize, const M: usize
     // SAFETY: the caller's contract.
     unsafe {
         call(h, |h| {
-            if state.is_null() {
-                return Err((RBSS_ERR_ARGUMENT, "`state` is a null pointer".to_string()));
-            }
             run_simulation(
                 h,
                 method,
@@ -200,6 +204,13 @@ unsafe fn run_simulation<K: Dynamics<N, M>, const N: usize, const M: usize>(
 ) -> Result<(), Failure> {
     // SAFETY: the caller's contract.
     unsafe {
+        // Every output checked before anything is written (`state` too, also written with
+        // `RBSS_ERR_STATE`).
+        let mut outs = vec![(x, "x"), (xdot, "xdot")];
+        if let Some(p) = state {
+            outs.push((p, "state"));
+        }
+        outputs_given(&outs)?;
         let x0 = read_n(x0, "x0")?;
         let xdot0 = read_n(xdot0, "xdot0")?;
         let k = h.actuated();

@@ -248,6 +248,15 @@ fn ptr_mut(p: *mut f64, offset: usize) -> *mut f64 {
     }
 }
 
+/// [`RBSS_ERR_ARGUMENT`] for the first null output: checked before anything is computed or
+/// written, so that a function with several outputs writes none of them when one is null.
+fn outputs_given(outputs: &[(*mut f64, &str)]) -> Result<(), Failure> {
+    match outputs.iter().find(|(p, _)| p.is_null()) {
+        Some((_, what)) => Err((RBSS_ERR_ARGUMENT, format!("`{what}` is a null pointer"))),
+        None => Ok(()),
+    }
+}
+
 /// Writes `v` to `p`.
 ///
 /// # Safety

@@ -1,6 +1,8 @@
 //! The C ABI's derivative functions (issue 36) on the five-bar exported with dynamics:
-//! `rbss_forward_dynamics_derivatives`, `rbss_linearize` and `rbss_step_derivatives` write the
-//! runtime's numbers (the same calls in this process, bit for bit), column-major; and their
+//! `rbss_forward_dynamics_derivatives`, `rbss_inverse_dynamics_derivatives`, `rbss_linearize`
+//! and `rbss_step_derivatives` write the runtime's numbers (the same calls in this process, bit
+//! for bit), column-major (the inverse-dynamics derivatives also against central differences of
+//! `rbss_inverse_dynamics`); and their
 //! refusals: a non-finite or null argument, a bad option, a state off the constraint manifold
 //! for the linearisation (`RBSS_ERR_STATE`), a non-finite value on the way
 //! (`RBSS_ERR_NONFINITE`) — each with nothing written.
@@ -13,9 +15,10 @@ use rbss_abi::{
 };
 use rbss_ffi::{RBSS_ERR_ARGUMENT, RBSS_ERR_NONFINITE, RBSS_ERR_STATE, RBSS_OK};
 use rbss_runtime::{
-    Baumgarte, Coordinates, Data, ForwardDynamicsDerivatives, Linearization, Model,
-    StepDerivatives, forward_dynamics_derivatives, inverse_velocity, linearize,
-    rk4_step_derivatives, semi_implicit_euler_step_derivatives,
+    Baumgarte, Coordinates, Data, ForwardDynamicsDerivatives, InverseDynamicsDerivatives,
+    Linearization, Model, StepDerivatives, forward_dynamics_derivatives,
+    inverse_dynamics_derivatives, inverse_velocity, linearize, rk4_step_derivatives,
+    semi_implicit_euler_step_derivatives,
 };
 
 rbss_ffi::export!(five_bar::FiveBar, dynamics);
@@ -315,6 +318,143 @@ fn refusals_are_typed_and_write_nothing() {
                 .chain(&fu)
                 .all(|v| *v == 7.0)
         );
+        rbss_free(h);
+    }
+}
+
+/// `rbss_inverse_dynamics_derivatives(h, x, xdot, xddot, ...)` at the five-bar's moving state
+/// with an acceleration: `u`, `lambda` and the six matrices are the runtime's (bit for bit, the
+/// `dU` matrices its first `actuated` rows, column-major), and they match central differences of
+/// `rbss_inverse_dynamics` through the ABI (step 1e-6; inverse dynamics is linear in `Xddot`).
+#[test]
+fn inverse_dynamics_derivatives_are_the_runtimes_and_the_differences() {
+    let model = Model::new(FiveBar::default());
+    let (x, xdot, _) = state(&model);
+    let xddot: [f64; N] = std::array::from_fn(|i| 0.3 - 0.1 * i as f64);
+    let h = rbss_new();
+    // SAFETY: `h` is live until `rbss_free`; every array has the length the header gives.
+    unsafe {
+        let mut data = Data::new(&model);
+        data.x = x;
+        data.xdot = xdot;
+        data.xddot = xddot;
+        let mut idd = InverseDynamicsDerivatives::new();
+        inverse_dynamics_derivatives(&model, &mut data, &mut idd, None).unwrap();
+        let (mut u, mut lambda) = ([0.0; K], [0.0; M]);
+        let mut du = [[0.0; K * N]; 3];
+        let mut dl = [[0.0; M * N]; 3];
+        let code = rbss_inverse_dynamics_derivatives(
+            h,
+            x.as_ptr(),
+            xdot.as_ptr(),
+            xddot.as_ptr(),
+            u.as_mut_ptr(),
+            lambda.as_mut_ptr(),
+            du[0].as_mut_ptr(),
+            du[1].as_mut_ptr(),
+            du[2].as_mut_ptr(),
+            dl[0].as_mut_ptr(),
+            dl[1].as_mut_ptr(),
+            dl[2].as_mut_ptr(),
+        );
+        assert_eq!(code, RBSS_OK, "{}", message(h));
+        assert_eq!(u[..], data.u[..K]);
+        assert_eq!(lambda, data.lambda);
+        let runtime_u = [&idd.du_dx, &idd.du_dxdot, &idd.du_dxddot];
+        let runtime_l = [&idd.dlambda_dx, &idd.dlambda_dxdot, &idd.dlambda_dxddot];
+        for w in 0..3 {
+            for j in 0..N {
+                for i in 0..K {
+                    assert_eq!(du[w][i + j * K], runtime_u[w][(i, j)], "dU {w} ({i}, {j})");
+                }
+                for i in 0..M {
+                    assert_eq!(
+                        dl[w][i + j * M],
+                        runtime_l[w][(i, j)],
+                        "dlambda {w} ({i}, {j})"
+                    );
+                }
+            }
+        }
+        assert!(du.iter().all(|d| d.iter().any(|v| *v != 0.0)));
+
+        // Central differences of rbss_inverse_dynamics, column j of each matrix.
+        let id = |x: &[f64; N], v: &[f64; N], a: &[f64; N]| {
+            let (mut u, mut l) = ([0.0; K], [0.0; M]);
+            let code = rbss_inverse_dynamics(
+                h,
+                x.as_ptr(),
+                v.as_ptr(),
+                a.as_ptr(),
+                u.as_mut_ptr(),
+                l.as_mut_ptr(),
+            );
+            assert_eq!(code, RBSS_OK, "{}", message(h));
+            (u, l)
+        };
+        let step = 1e-6;
+        let mut worst = 0.0_f64;
+        for w in 0..3 {
+            for j in 0..N {
+                let mut p = [x, xdot, xddot];
+                let mut q = [x, xdot, xddot];
+                p[w][j] += step;
+                q[w][j] -= step;
+                let (up, lp) = id(&p[0], &p[1], &p[2]);
+                let (uq, lq) = id(&q[0], &q[1], &q[2]);
+                for i in 0..K {
+                    let fd = (up[i] - uq[i]) / (2.0 * step);
+                    let e = (fd - du[w][i + j * K]).abs() / (1.0 + fd.abs());
+                    worst = worst.max(e);
+                }
+                for i in 0..M {
+                    let fd = (lp[i] - lq[i]) / (2.0 * step);
+                    let e = (fd - dl[w][i + j * M]).abs() / (1.0 + fd.abs());
+                    worst = worst.max(e);
+                }
+            }
+        }
+        assert!(worst < 1e-6, "against central differences: {worst:e}");
+        eprintln!("five-bar inverse-dynamics derivatives vs central differences: {worst:.1e}");
+
+        // Refusals: a null output (nothing written), a non-finite acceleration.
+        let mut u7 = [7.0; K];
+        let code = rbss_inverse_dynamics_derivatives(
+            h,
+            x.as_ptr(),
+            xdot.as_ptr(),
+            xddot.as_ptr(),
+            u7.as_mut_ptr(),
+            lambda.as_mut_ptr(),
+            du[0].as_mut_ptr(),
+            du[1].as_mut_ptr(),
+            du[2].as_mut_ptr(),
+            dl[0].as_mut_ptr(),
+            dl[1].as_mut_ptr(),
+            std::ptr::null_mut(),
+        );
+        assert_eq!(code, RBSS_ERR_ARGUMENT);
+        assert_eq!(message(h), "`dlambda_dxddot` is a null pointer");
+        assert_eq!(u7, [7.0; K]);
+        let mut nan = xddot;
+        nan[1] = f64::NAN;
+        let code = rbss_inverse_dynamics_derivatives(
+            h,
+            x.as_ptr(),
+            xdot.as_ptr(),
+            nan.as_ptr(),
+            u7.as_mut_ptr(),
+            lambda.as_mut_ptr(),
+            du[0].as_mut_ptr(),
+            du[1].as_mut_ptr(),
+            du[2].as_mut_ptr(),
+            dl[0].as_mut_ptr(),
+            dl[1].as_mut_ptr(),
+            dl[2].as_mut_ptr(),
+        );
+        assert_eq!(code, RBSS_ERR_ARGUMENT);
+        assert_eq!(message(h), "`xddot`[1] is not finite (NaN)");
+        assert_eq!(u7, [7.0; K]);
         rbss_free(h);
     }
 }

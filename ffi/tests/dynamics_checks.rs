@@ -8,6 +8,7 @@
 //!   tolerance the run is the plain `rbss_simulate`'s.
 //! - The raw kernels report an inf or NaN output as `RBSS_ERR_NONFINITE` and leave the output
 //!   untouched (before: `RBSS_OK` with inf in it); a finite output at a huge input is `RBSS_OK`.
+//! - A function with several outputs refuses a null one before it writes any.
 
 use std::ffi::CStr;
 
@@ -285,6 +286,113 @@ fn raw_kernels_report_non_finite_outputs() {
             rbss_gamma(h, home.as_ptr(), v.as_ptr(), out.as_mut_ptr()),
             RBSS_OK
         );
+        rbss_free(h);
+    }
+}
+
+/// A function with several outputs checks every one before it writes any: a null `lambda`
+/// (the last output) leaves `xddot` (`u`, `x`) as it was (before: `rbss_forward_dynamics`
+/// wrote `xddot`, then failed on `lambda`).
+#[test]
+fn a_null_output_is_refused_before_any_output_is_written() {
+    let h = rbss_new();
+    let (n, m) = (five_bar::N, five_bar::M);
+    let null = std::ptr::null_mut::<f64>();
+    // SAFETY: as above; the null pointers are refused before any use.
+    unsafe {
+        let mut x = vec![0.0; n];
+        assert_eq!(rbss_home(h, x.as_mut_ptr()), RBSS_OK);
+        let (xdot, u) = (vec![0.0; n], vec![0.1, -0.2]);
+        let mut first = vec![7.0; n];
+        let untouched = |v: &[f64]| v.iter().all(|&e| e == 7.0);
+        let code = rbss_forward_dynamics(
+            h,
+            x.as_ptr(),
+            xdot.as_ptr(),
+            u.as_ptr(),
+            first.as_mut_ptr(),
+            null,
+        );
+        assert_eq!(code, RBSS_ERR_ARGUMENT);
+        assert_eq!(message(h), "`lambda` is a null pointer");
+        assert!(untouched(&first), "rbss_forward_dynamics wrote xddot");
+        let code = rbss_forward_dynamics_batch(
+            h,
+            1,
+            x.as_ptr(),
+            xdot.as_ptr(),
+            u.as_ptr(),
+            first.as_mut_ptr(),
+            null,
+        );
+        assert_eq!(
+            (code, message(h).as_str()),
+            (RBSS_ERR_ARGUMENT, "`lambda` is a null pointer")
+        );
+        assert!(untouched(&first), "rbss_forward_dynamics_batch wrote xddot");
+        let xddot = vec![0.3; n];
+        let code = rbss_inverse_dynamics(
+            h,
+            x.as_ptr(),
+            xdot.as_ptr(),
+            xddot.as_ptr(),
+            first.as_mut_ptr(),
+            null,
+        );
+        assert_eq!(
+            (code, message(h).as_str()),
+            (RBSS_ERR_ARGUMENT, "`lambda` is a null pointer")
+        );
+        assert!(untouched(&first), "rbss_inverse_dynamics wrote u");
+        let code = rbss_simulate(
+            h,
+            x.as_ptr(),
+            xdot.as_ptr(),
+            u.as_ptr(),
+            0.01,
+            1e-8,
+            1e-8,
+            first.as_mut_ptr(),
+            null,
+        );
+        assert_eq!(
+            (code, message(h).as_str()),
+            (RBSS_ERR_ARGUMENT, "`xdot` is a null pointer")
+        );
+        assert!(untouched(&first), "rbss_simulate wrote x");
+        let mut state = vec![7.0; 4];
+        let code = rbss_simulate_checked(
+            h,
+            RBSS_METHOD_DOPRI5,
+            x.as_ptr(),
+            xdot.as_ptr(),
+            u.as_ptr(),
+            0.01,
+            1e-8,
+            1e-8,
+            1e-6,
+            0,
+            first.as_mut_ptr(),
+            null,
+            state.as_mut_ptr(),
+        );
+        assert_eq!(code, RBSS_ERR_ARGUMENT, "{}", message(h));
+        assert!(
+            untouched(&first) && untouched(&state),
+            "rbss_simulate_checked wrote"
+        );
+        // The same calls with every output given succeed (the refusals were the null alone).
+        let mut lambda = vec![0.0; m];
+        let code = rbss_forward_dynamics(
+            h,
+            x.as_ptr(),
+            xdot.as_ptr(),
+            u.as_ptr(),
+            first.as_mut_ptr(),
+            lambda.as_mut_ptr(),
+        );
+        assert_eq!(code, RBSS_OK, "{}", message(h));
+        assert!(!untouched(&first));
         rbss_free(h);
     }
 }

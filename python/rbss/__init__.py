@@ -5,7 +5,7 @@
     x = robot.ik([0.1, 0, 0.94, 0.1, 0, 0])             # numpy arrays in and out
     xddot, lam = robot.forward_dynamics(x, np.zeros(robot.n), np.zeros(robot.actuated))
 
-Two implementations of one API over the library's C ABI (ffi/include/rbss.h, version 3):
+Two implementations of one API over the library's C ABI (ffi/include/rbss.h, version 4):
 `rbss._native` (python/native: PyO3, compiled once for every robot when the package is installed,
 `pip install ./python`; it loads the library and calls its functions, under 1 us per call over
 the library) when it is importable, else a thin ctypes + numpy layer (about 8 us per call over;
@@ -194,6 +194,19 @@ _FD_DERIVATIVES = (
     "dlambda_dx",
     "dlambda_dxdot",
     "dlambda_du",
+)
+
+
+# inverse_dynamics_derivatives' results, in the order of rbss_inverse_dynamics_derivatives.
+_ID_DERIVATIVES = (
+    "u",
+    "lambda",
+    "du_dx",
+    "du_dxdot",
+    "du_dxddot",
+    "dlambda_dx",
+    "dlambda_dxdot",
+    "dlambda_dxddot",
 )
 
 
@@ -549,6 +562,21 @@ class Robot:
             self._invoke(f, *[_ptr(v) for v in arrays])
 
         return dict(zip(_FD_DERIVATIVES, self._shaped_rows(one, ins, shapes)))
+
+    def inverse_dynamics_derivatives(self, x, xdot, xddot):
+        """Inverse dynamics at the motion (x, xdot, xddot) and its derivatives
+        (rbss_inverse_dynamics_derivatives): a dict of "u" (actuated,), "lambda" (m,), "du_dx",
+        "du_dxdot", "du_dxddot" (actuated, n), "dlambda_dx", "dlambda_dxdot", "dlambda_dxddot"
+        (m, n); (k, n) inputs give each a leading axis k."""
+        n, m, a = self.n, self.m, self.actuated
+        ins = [self._arr(x, n, "x"), self._arr(xdot, n, "xdot"), self._arr(xddot, n, "xddot")]
+        shapes = [(a, None), (m, None), (a, n), (a, n), (a, n), (m, n), (m, n), (m, n)]
+        f = self._lib.rbss_inverse_dynamics_derivatives
+
+        def one(*arrays):
+            self._invoke(f, *[_ptr(v) for v in arrays])
+
+        return dict(zip(_ID_DERIVATIVES, self._shaped_rows(one, ins, shapes)))
 
     def linearize(self, x, xdot, u, coordinates="outputs"):
         """(A, B) of d/dt [y; ydot] = A [y; ydot] + B U, forward dynamics linearised on the

@@ -2,7 +2,7 @@
 # ffi/abi/src/lib.rs (rbss-abi): do not edit. `RBSS_BLESS=1 cargo test --release -p
 # rbss-ffi --test abi` rewrites it; that test fails when it is stale.
 
-ABI_VERSION = 3
+ABI_VERSION = 4
 
 RBSS_OK = 0
 RBSS_ERR_SOLVER = 1
@@ -55,6 +55,7 @@ FUNCTIONS = {
     "rbss_mass_matrix": ("int", (("h", "handle", None), ("x", "input", "n"), ("mass", "output", "n x n"))),
     "rbss_psi": ("int", (("h", "handle", None), ("x", "input", "n"), ("xdot", "input", "n"), ("psi", "output", "n"))),
     "rbss_forward_dynamics_derivatives": ("int", (("h", "handle", None), ("x", "input", "n"), ("xdot", "input", "n"), ("u", "input", "actuated"), ("xddot", "output", "n"), ("lambda", "output", "m"), ("dxddot_dx", "output", "n x n"), ("dxddot_dxdot", "output", "n x n"), ("dxddot_du", "output", "n x actuated"), ("dlambda_dx", "output", "m x n"), ("dlambda_dxdot", "output", "m x n"), ("dlambda_du", "output", "m x actuated"))),
+    "rbss_inverse_dynamics_derivatives": ("int", (("h", "handle", None), ("x", "input", "n"), ("xdot", "input", "n"), ("xddot", "input", "n"), ("u", "output", "actuated"), ("lambda", "output", "m"), ("du_dx", "output", "actuated x n"), ("du_dxdot", "output", "actuated x n"), ("du_dxddot", "output", "actuated x n"), ("dlambda_dx", "output", "m x n"), ("dlambda_dxdot", "output", "m x n"), ("dlambda_dxddot", "output", "m x n"))),
     "rbss_linearize": ("int", (("h", "handle", None), ("coordinates", "int", None), ("x", "input", "n"), ("xdot", "input", "n"), ("u", "input", "actuated"), ("a", "output", "(2 * (n - m)) x(2 * (n - m))"), ("b", "output", "(2 * (n - m)) x actuated"))),
     "rbss_step_derivatives": ("int", (("h", "handle", None), ("method", "int", None), ("x", "input", "n"), ("xdot", "input", "n"), ("u", "input", "actuated"), ("dt", "double", None), ("baumgarte", "input_or_null", "2"), ("x_next", "output", "n"), ("xdot_next", "output", "n"), ("fx", "output", "(2 * n) x(2 * n)"), ("fu", "output", "(2 * n) x actuated"))),
 }

@@ -23,7 +23,7 @@ def ctypes_robot():
 
 def test_ctypes_declares_the_table(ctypes_robot):
     lib = ctypes_robot._lib
-    assert len(_abi.FUNCTIONS) == 32
+    assert len(_abi.FUNCTIONS) == 33
     for name, (ret, args) in _abi.FUNCTIONS.items():
         fn = getattr(lib, name)
         assert fn.restype is rbss._RETURN_TYPES[ret], name
@@ -35,7 +35,7 @@ def test_ctypes_declares_the_table(ctypes_robot):
 
 
 def test_one_api_and_one_version():
-    assert rbss.ABI_VERSION == _abi.ABI_VERSION == 3
+    assert rbss.ABI_VERSION == _abi.ABI_VERSION == 4
     if not rbss.native_available():
         pytest.skip("rbss._native is not installed")
     assert rbss._native.ABI_VERSION == _abi.ABI_VERSION

@@ -1,6 +1,7 @@
 """The derivative methods (issue 36) on the 6-UPS, both implementations: forward_dynamics_derivatives,
 linearize and step_derivatives against central differences of the layer's own forward dynamics
-(relative error <= 1e-6 of each matrix's largest entry); linearize along the constraint manifold
+(relative error <= 1e-6 of each matrix's largest entry), inverse_dynamics_derivatives against
+central differences of its inverse_dynamics; linearize along the constraint manifold
 (y perturbed, the positions re-solved by ik or fk, the velocities by velocity or
 forward_velocity); step_derivatives against an RK4 / semi-implicit Euler step written here on
 forward_dynamics. Shapes, batches (rows equal to single calls) and refusals (a state off the
@@ -96,6 +97,44 @@ def test_forward_dynamics_derivatives_against_central_differences(robot):
         assert_rel(f"dlambda_{wrt}", d[f"dlambda_{wrt}"], num[n:])
 
 
+def test_inverse_dynamics_derivatives_against_central_differences(robot):
+    x, xdot, u = state(robot)
+    xddot, _ = robot.forward_dynamics(x, xdot, u)
+    xddot = xddot + 0.1  # off the acceleration constraint too: the derivatives hold anywhere
+    d = robot.inverse_dynamics_derivatives(x, xdot, xddot)
+    n, m, a = robot.n, robot.m, robot.actuated
+    shapes = {
+        "u": (a,),
+        "lambda": (m,),
+        "du_dx": (a, n),
+        "du_dxdot": (a, n),
+        "du_dxddot": (a, n),
+        "dlambda_dx": (m, n),
+        "dlambda_dxdot": (m, n),
+        "dlambda_dxddot": (m, n),
+    }
+    assert {k: v.shape for k, v in d.items()} == shapes
+    uu, lam = robot.inverse_dynamics(x, xdot, xddot)
+    np.testing.assert_array_equal(d["u"], uu)
+    np.testing.assert_array_equal(d["lambda"], lam)
+    # At forward dynamics' own acceleration, inverse dynamics gives back the forces.
+    at_fd = robot.inverse_dynamics_derivatives(x, xdot, robot.forward_dynamics(x, xdot, u)[0])
+    np.testing.assert_allclose(at_fd["u"], u, rtol=0, atol=1e-9 * np.max(np.abs(u)))
+
+    def inv(x_, v_, a_):
+        u_, la = robot.inverse_dynamics(x_, v_, a_)
+        return np.concatenate([u_, la])
+
+    for wrt, p, f in [
+        ("dx", x, lambda p: inv(p, xdot, xddot)),
+        ("dxdot", xdot, lambda p: inv(x, p, xddot)),
+        ("dxddot", xddot, lambda p: inv(x, xdot, p)),
+    ]:
+        num = central(f, p)
+        assert_rel(f"du_{wrt}", d[f"du_{wrt}"], num[:a])
+        assert_rel(f"dlambda_{wrt}", d[f"dlambda_{wrt}"], num[a:])
+
+
 @pytest.mark.parametrize("coordinates", ["outputs", "actuated"])
 def test_linearize_along_the_manifold(robot, coordinates):
     x, xdot, u = state(robot)
@@ -179,6 +218,9 @@ def test_batches_are_rows_of_single_calls(robot):
     batch = robot.forward_dynamics_derivatives(xs, vs, us)
     assert batch["dxddot_dx"].shape == (2, robot.n, robot.n)
     assert batch["dlambda_du"].shape == (2, robot.m, robot.actuated)
+    inv = robot.inverse_dynamics_derivatives(xs, vs, np.stack([xdot, xdot]))
+    assert inv["du_dxddot"].shape == (2, robot.actuated, robot.n)
+    assert inv["dlambda_dx"].shape == (2, robot.m, robot.n)
     A, B = robot.linearize(xs, vs, us)
     assert A.shape == (2, 2 * d, 2 * d) and B.shape == (2, 2 * d, robot.actuated)
     x1, v1, fx, fu = robot.step_derivatives(xs, vs, us, 1e-3)
@@ -187,6 +229,9 @@ def test_batches_are_rows_of_single_calls(robot):
         one = robot.forward_dynamics_derivatives(xs[i], vs[i], us[i])
         for k, v in one.items():
             np.testing.assert_array_equal(batch[k][i], v, err_msg=k)
+        one = robot.inverse_dynamics_derivatives(xs[i], vs[i], xdot)
+        for k, v in one.items():
+            np.testing.assert_array_equal(inv[k][i], v, err_msg=k)
         a1, b1 = robot.linearize(xs[i], vs[i], us[i])
         np.testing.assert_array_equal(A[i], a1)
         np.testing.assert_array_equal(B[i], b1)
@@ -212,6 +257,7 @@ def test_refusals(robot):
         lambda: robot.forward_dynamics_derivatives(bad, xdot, u),
         lambda: robot.linearize(bad, xdot, u),
         lambda: robot.step_derivatives(bad, xdot, u, 1e-3),
+        lambda: robot.inverse_dynamics_derivatives(bad, xdot, xdot),
     ):
         with pytest.raises(rbss.RbssError, match=r"`x`\[3\] is not finite") as e:
             call()
@@ -230,5 +276,7 @@ def test_refusals(robot):
         robot.step_derivatives(x, xdot, u, 1e-3, method="euler")
     with pytest.raises(ValueError, match=r"u: expected shape \(6,\) or \(k, 6\), got \(5,\)"):
         robot.forward_dynamics_derivatives(x, xdot, u[:5])
+    with pytest.raises(ValueError, match=r"xddot: expected shape \(24,\) or \(k, 24\), got \(23,\)"):
+        robot.inverse_dynamics_derivatives(x, xdot, xdot[:23])
     with pytest.raises(ValueError, match=r"baumgarte: expected shape \(2,\), got \(3,\)"):
         robot.step_derivatives(x, xdot, u, 1e-3, baumgarte=[1.0, 2.0, 3.0])

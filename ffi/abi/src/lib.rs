@@ -37,7 +37,7 @@
 use std::ffi::c_int;
 
 /// The version of the C ABI: `rbss_abi_version()` returns it; a loader refuses another.
-pub const ABI_VERSION: u32 = 3;
+pub const ABI_VERSION: u32 = 4;
 
 /// Calls `callback!` with the table: `functions!([path::to::callback] tokens...)` expands to
 /// `path::to::callback! { tokens... GROUP fn NAME(...) -> RETURN = PATH(...); ... }`, in the
@@ -95,6 +95,8 @@ macro_rules! functions {
                 = dynamics::psi(h, x, xdot, psi);
             dynamics fn rbss_forward_dynamics_derivatives(h: handle, x: input[n], xdot: input[n], u: input[actuated], xddot: output[n], lambda: output[m], dxddot_dx: output[n x n], dxddot_dxdot: output[n x n], dxddot_du: output[n x actuated], dlambda_dx: output[m x n], dlambda_dxdot: output[m x n], dlambda_du: output[m x actuated]) -> int
                 = derivatives::forward_dynamics_derivatives(h, x, xdot, u, xddot, lambda, dxddot_dx, dxddot_dxdot, dxddot_du, dlambda_dx, dlambda_dxdot, dlambda_du);
+            dynamics fn rbss_inverse_dynamics_derivatives(h: handle, x: input[n], xdot: input[n], xddot: input[n], u: output[actuated], lambda: output[m], du_dx: output[actuated x n], du_dxdot: output[actuated x n], du_dxddot: output[actuated x n], dlambda_dx: output[m x n], dlambda_dxdot: output[m x n], dlambda_dxddot: output[m x n]) -> int
+                = derivatives::inverse_dynamics_derivatives(h, x, xdot, xddot, u, lambda, du_dx, du_dxdot, du_dxddot, dlambda_dx, dlambda_dxdot, dlambda_dxddot);
             dynamics fn rbss_linearize(h: handle, coordinates: int, x: input[n], xdot: input[n], u: input[actuated], a: output[(2 * (n - m)) x (2 * (n - m))], b: output[(2 * (n - m)) x actuated]) -> int
                 = derivatives::linearize(h, coordinates, x, xdot, u, a, b);
             dynamics fn rbss_step_derivatives(h: handle, method: int, x: input[n], xdot: input[n], u: input[actuated], dt: double, baumgarte: input_or_null[2], x_next: output[n], xdot_next: output[n], fx: output[(2 * n) x (2 * n)], fu: output[(2 * n) x actuated]) -> int
@@ -209,8 +211,9 @@ constants! {
     RBSS_ERR_STATE = 5;
     /// A raw kernel's output is not finite (inf or NaN, e.g. at `x = 1e300`): the input is
     /// outside the range the model's formulas hold in; the outputs are not written. The
-    /// derivative functions (`rbss_forward_dynamics_derivatives`, `rbss_linearize`,
-    /// `rbss_step_derivatives`) report a non-finite value met on the way so too.
+    /// derivative functions (`rbss_forward_dynamics_derivatives`,
+    /// `rbss_inverse_dynamics_derivatives`, `rbss_linearize`, `rbss_step_derivatives`) report a
+    /// non-finite value met on the way so too.
     RBSS_ERR_NONFINITE = 6;
     /// `rbss_simulate_method`'s integrator: Dormand–Prince 5(4) (`rbss_simulate`'s).
     RBSS_METHOD_DOPRI5 = 0;
@@ -300,6 +303,6 @@ mod tests {
                 assert_eq!(array, a.len.is_some(), "{}: {}", f.name, a.name);
             }
         }
-        assert_eq!(FUNCTIONS.len(), 32);
+        assert_eq!(FUNCTIONS.len(), 33);
     }
 }

@@ -966,6 +966,68 @@ impl Robot {
         Ok(d.into_any())
     }
 
+    /// Inverse dynamics at the motion (x, xdot, xddot) and its derivatives
+    /// (rbss_inverse_dynamics_derivatives): a dict of "u" (actuated,), "lambda" (m,), "du_dx",
+    /// "du_dxdot", "du_dxddot" (actuated, n), "dlambda_dx", "dlambda_dxdot", "dlambda_dxddot"
+    /// (m, n); (k, n) inputs give each a leading axis k.
+    fn inverse_dynamics_derivatives<'py>(
+        &self,
+        py: Python<'py>,
+        x: &Bound<'py, PyAny>,
+        xdot: &Bound<'py, PyAny>,
+        xddot: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (f, n, m, a) = (
+            self.api.rbss_inverse_dynamics_derivatives,
+            self.n,
+            self.m,
+            self.actuated,
+        );
+        let ins = [(x, n, "x"), (xdot, n, "xdot"), (xddot, n, "xddot")];
+        let shapes = [
+            (a, None),
+            (m, None),
+            (a, Some(n)),
+            (a, Some(n)),
+            (a, Some(n)),
+            (m, Some(n)),
+            (m, Some(n)),
+            (m, Some(n)),
+        ];
+        // SAFETY: as in `one`: the outputs hold the lengths of rbss.h.
+        let outs = self.shaped_rows(py, &ins, &shapes, |h, c, r| unsafe {
+            f(
+                h,
+                c.input(0, r),
+                c.input(1, r),
+                c.input(2, r),
+                c.output(0, r),
+                c.output(1, r),
+                c.output(2, r),
+                c.output(3, r),
+                c.output(4, r),
+                c.output(5, r),
+                c.output(6, r),
+                c.output(7, r),
+            )
+        })?;
+        let keys = [
+            "u",
+            "lambda",
+            "du_dx",
+            "du_dxdot",
+            "du_dxddot",
+            "dlambda_dx",
+            "dlambda_dxdot",
+            "dlambda_dxddot",
+        ];
+        let d = PyDict::new(py);
+        for (k, v) in keys.into_iter().zip(outs) {
+            d.set_item(k, v)?;
+        }
+        Ok(d.into_any())
+    }
+
     /// (A, B) of d/dt [y; ydot] = A [y; ydot] + B U, forward dynamics linearised on the
     /// constraint manifold at (x, xdot, u) (rbss_linearize) in the d = n - m independent
     /// coordinates y: "outputs" (output_index's) or "actuated" (actuated_index's, fully
