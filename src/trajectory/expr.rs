@@ -279,7 +279,7 @@ mod tests {
         );
         assert!(e("atan2(t)").message.contains("write `atan2(y, x)`"));
         assert_eq!(e("t * é").offset, 4);
-        let deep = "(".repeat(100_000) + "t" + &")".repeat(100_000);
+        let deep = "(".repeat(100_000) + "t" + ")".repeat(100_000).as_str();
         assert!(e(&deep).message.contains("nested too deeply"));
         let deep = "-".repeat(100_000) + "t";
         assert!(e(&deep).message.contains("nested too deeply"));
