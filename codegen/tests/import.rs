@@ -796,4 +796,27 @@ fn sdf_prismatic_joint_closing_a_loop_is_a_coordinate() {
     let worst = worst_difference(&plain, &imported);
     println!("slider-crank from SDF vs slider_crank.toml: worst relative difference {worst:e}");
     assert!(worst < 1e-12, "worst {worst:e}");
+
+    // It generates: the home assembled with the output k = -0.9 held is the hand solution,
+    // tan th = b sin(-k) / (a + b cos k).
+    let path = here().join("slider_crank_sdf.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let generated = rbss_codegen::generate(
+        path.to_str().unwrap(),
+        &text,
+        &rbss_codegen::Options::default(),
+        &mut |_| {},
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let k: f64 = -0.9;
+    let th = (b * (-k).sin()).atan2(a + b * k.cos());
+    let slide = a * th.cos() + b * (th + k).cos() - x0;
+    let home = &generated.report.home;
+    println!("slider-crank home {home:?}, by hand [{th}, {k}, {slide}]");
+    for (got, want) in home.iter().zip([th, k, slide]) {
+        assert!(
+            (got - want).abs() < 1e-12,
+            "home {home:?}, by hand [{th}, {k}, {slide}]"
+        );
+    }
 }
