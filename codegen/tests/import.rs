@@ -887,3 +887,133 @@ fn floating_bases_import_as_free_joints() {
     assert_eq!(urdf.actuated.len(), 1);
     assert!(close(&pose_at_home(&urdf), &want));
 }
+
+/// `f` of a model at `x` (velocities zero), by the coordinates' names.
+fn f_at(m: &Model, at: &[(&str, f64)]) -> Vec<f64> {
+    let x: Vec<f64> = m
+        .coordinates
+        .iter()
+        .map(|c| at.iter().find(|(n, _)| *n == c.name).unwrap().1)
+        .collect();
+    let d = derived(m);
+    let p: Vec<f64> = m.parameters.iter().map(|q| q.value).collect();
+    d.f.iter()
+        .map(|&i| d.graph.eval(i, &x, &vec![0.0; x.len()], &p))
+        .collect()
+}
+
+/// SDF `gearbox` joints are couplings with SDFormat's sign, `theta_2 = -gearbox_ratio *
+/// theta_1` (both angles against `<gearbox_reference_body>`, about `<axis>` and `<axis2>`):
+/// gearbox.sdf's driven shaft turns about -z, so the coupling is `j2 = 2 j1`; with `<axis2>`
+/// along -z too it is `j2 = -2 j1`. The imported robot derives the kernels of gearbox.toml,
+/// written by hand, and the driven joint is not actuated.
+#[test]
+fn sdf_gearbox_joints_are_couplings() {
+    let plain = model_at(&here().join("gearbox.toml"));
+    let imported = model_at(&here().join("gearbox_sdf.toml"));
+    let names = |m: &Model, idx: &[usize]| {
+        idx.iter()
+            .map(|&i| m.coordinates[i].name.clone())
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(names(&imported, &imported.actuated), ["j1"]);
+    assert_eq!(imported.loops.len(), 1);
+    assert_eq!(imported.loops[0].name, "mesh");
+    // f = j2 - ratio j1: zero on j2 = 2 j1, -1.2 on the other sign.
+    let on = f_at(&imported, &[("j1", 0.3), ("j2", 0.6)]);
+    let off = f_at(&imported, &[("j1", 0.3), ("j2", -0.6)]);
+    assert!(on[0].abs() < 1e-15, "f on the coupling: {on:?}");
+    assert!((off[0] + 1.2).abs() < 1e-15, "f off the coupling: {off:?}");
+    let worst = worst_difference(&plain, &imported);
+    println!("gearbox from SDF vs gearbox.toml: worst relative difference {worst:e}");
+    assert!(worst < 1e-12, "worst {worst:e}");
+
+    // `<axis2>` along -z, as j2: theta_2 = j2, theta_1 = j1, so j2 = -2 j1.
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(here().join("gearbox.sdf")).unwrap();
+    let flipped = text.replace(
+        "<axis2><xyz>0 0 1</xyz></axis2>",
+        "<axis2><xyz>0 0 -1</xyz></axis2>",
+    );
+    assert_ne!(flipped, text);
+    std::fs::write(dir.path().join("gearbox.sdf"), flipped).unwrap();
+    std::fs::write(dir.path().join("m.toml"), "sdf = \"gearbox.sdf\"\n").unwrap();
+    let m = model_at(&dir.path().join("m.toml"));
+    let on = f_at(&m, &[("j1", 0.3), ("j2", -0.6)]);
+    let off = f_at(&m, &[("j1", 0.3), ("j2", 0.6)]);
+    assert!(on[0].abs() < 1e-15, "f on the coupling: {on:?}");
+    assert!((off[0] - 1.2).abs() < 1e-15, "f off the coupling: {off:?}");
+}
+
+/// A prismatic joint that closes a loop (slider_crank.sdf's `slide`, whose guide the tree
+/// reaches after the slider) is a coordinate, and the joint that brought the slider in (`pin`)
+/// closes the loop; a note says so. The loop closes at the hand-computed assembly of the
+/// slider-crank (`a sin th + b sin(th + k) = 0`, the slider at `a cos th + b cos(th + k)`), not
+/// off it, and the robot derives the kernels of slider_crank.toml, written by hand.
+#[test]
+fn sdf_prismatic_joint_closing_a_loop_is_a_coordinate() {
+    use rbss_codegen::import::{Format, import_file};
+    let (imp, _) = import_file(
+        &here().join("slider_crank.sdf"),
+        "slider_crank.sdf",
+        Format::Sdf,
+    )
+    .unwrap_or_else(|e| panic!("{}", e.render()));
+    let coords: Vec<&str> = imp.coordinates.iter().map(|c| c.name.as_str()).collect();
+    assert_eq!(coords, ["th", "k", "slide"]);
+    assert_eq!(imp.coordinates[2].unit, "m");
+    assert_eq!(imp.loops.len(), 1);
+    assert_eq!(imp.loops[0].keys[0], ("name", "\"pin\"".to_string()));
+    assert!(
+        imp.notes
+            .iter()
+            .any(|n| n.contains("`slide`") && n.contains("`pin`")),
+        "{:?}",
+        imp.notes
+    );
+
+    let plain = model_at(&here().join("slider_crank.toml"));
+    let imported = model_at(&here().join("slider_crank_sdf.toml"));
+    let (a, b, x0) = (0.1, 0.3, 0.4);
+    for th in [0.7f64, -1.9, 2.8] {
+        let phi = -(a * th.sin() / b).asin(); // th + k, the pin on the x axis
+        let k = phi - th;
+        let slide = a * th.cos() + b * phi.cos() - x0;
+        let at = [("th", th), ("k", k), ("slide", slide)];
+        let f = f_at(&imported, &at);
+        assert_eq!(f.len(), 2);
+        assert!(f.iter().all(|v| v.abs() < 1e-15), "th {th}: f {f:?}");
+        // The slider moved by 1 mm along the guide: the pin is 1 mm short in x.
+        let moved = f_at(&imported, &[("th", th), ("k", k), ("slide", slide + 1e-3)]);
+        assert!(
+            (moved[0] + 1e-3).abs() < 1e-15 && moved[1].abs() < 1e-15,
+            "th {th}: f {moved:?}"
+        );
+    }
+    let worst = worst_difference(&plain, &imported);
+    println!("slider-crank from SDF vs slider_crank.toml: worst relative difference {worst:e}");
+    assert!(worst < 1e-12, "worst {worst:e}");
+
+    // It generates: the home assembled with the output k = -0.9 held is the hand solution,
+    // tan th = b sin(-k) / (a + b cos k).
+    let path = here().join("slider_crank_sdf.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let generated = rbss_codegen::generate(
+        path.to_str().unwrap(),
+        &text,
+        &rbss_codegen::Options::default(),
+        &mut |_| {},
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let k: f64 = -0.9;
+    let th = (b * (-k).sin()).atan2(a + b * k.cos());
+    let slide = a * th.cos() + b * (th + k).cos() - x0;
+    let home = &generated.report.home;
+    println!("slider-crank home {home:?}, by hand [{th}, {k}, {slide}]");
+    for (got, want) in home.iter().zip([th, k, slide]) {
+        assert!(
+            (got - want).abs() < 1e-12,
+            "home {home:?}, by hand [{th}, {k}, {slide}]"
+        );
+    }
+}

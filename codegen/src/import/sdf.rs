@@ -7,6 +7,8 @@
 //! | `<joint type="ball">` in the tree | three coordinates `NAME_x`, `NAME_y`, `NAME_z` (`Rx Ry Rz` about the joint's origin) |
 //! | `<joint type="fixed">` in the tree | the child's steps only |
 //! | a joint whose child is already in the tree | a loop at the joint's frame: `ball` (ball), `hinge` (revolute, about the axis), `weld` (fixed) |
+//! | a `prismatic` joint whose child is already in the tree | the prismatic joint brings the child in (a coordinate), and the joint that brought it in closes the loop instead (as above); refused when that joint is prismatic too, or when the loop hangs below the child (a note says which joint closes) |
+//! | `<joint type="gearbox">` (`<gearbox_ratio>` r, `<gearbox_reference_body>` R, `<axis>`, `<axis2>`) | a `coupling` loop named after the joint: SDFormat's `theta_2 = -r theta_1`, `theta_1` the parent link's angle against R about `<axis>`, `theta_2` the child's about `<axis2>`, i.e. `q2 = -r s1 s2 q1` between the revolute joints of the tree that join parent and child to R (`s = ±1`: the joint's axis along or against the gearbox's, the joint from R to the link or back); `q2` is not actuated |
 //! | `<frame>` | a frame `relative_to` may name |
 //! | `<inertial>` (`<pose>`, `<mass>`, `<inertia>`) | `mass`, `com`, `inertia` (in the link's axes) |
 //! | `<axis><dynamics>` `damping`, `spring_stiffness`, `spring_reference` | `damping`, `stiffness`, `rest` (`friction` ignored, with a warning) |
@@ -14,8 +16,9 @@
 //!
 //! | a `<link>` that is the child of no joint (the model's root: a floating base) | a free joint `LINK_free`: 7 coordinates `LINK_free_x`, `_y`, `_z`, `LINK_free_qw`, `_qx`, `_qy`, `_qz` that move the link from its pose as written (home: zero and `(1, 0, 0, 0)`) |
 //!
-//! Refused: `universal`, `revolute2`, `screw` and `gearbox` joints and a prismatic joint
-//! closing a loop.
+//! Refused: `universal`, `revolute2` and `screw` joints; a prismatic joint closing a loop that
+//! no other joint of it can close; a gearbox whose links are not turned against its reference
+//! body by revolute joints of the tree about its axes.
 
 use std::collections::HashMap;
 
@@ -113,12 +116,13 @@ pub(super) fn import(cx: &mut Cx<'_>, doc: &Document<'_>) -> Option<Imported> {
     let links: Vec<Node<'_, '_>> = children(model, "link").collect();
     let joints: Vec<Node<'_, '_>> = children(model, "joint").collect();
     let mut frames = frames(cx, model, &links, &joints);
-    let (tree, closing, floating) = tree(cx, &links, &joints);
+    let (tree, closing, floating) = tree(cx, &links, &joints, &mut out);
     for &l in &floating {
         free_root(cx, &mut frames, l, &mut out);
     }
     bodies(cx, &mut frames, &links, &tree, &mut out);
     loops(cx, &mut frames, &closing, &mut out);
+    gearboxes(cx, &mut frames, &links, &joints, &tree, &mut out);
     Some(out)
 }
 
@@ -197,15 +201,20 @@ fn free_root<'a, 'i>(
 
 /// The tree: from the world and from the links no joint has as its child (floating bases),
 /// each joint whose parent is in it brings its child in; a joint whose child is already in
-/// closes a loop. The tree's joints in the order they reached their children, the closing
-/// joints and the floating links; a link or joint not tied to the world is reported.
+/// closes a loop. A prismatic joint that would close a loop brings its child in instead, and the
+/// joint that brought the child in closes the loop (the model language has no prismatic loop;
+/// where the loop is cut does not change the mechanism). `gearbox` joints are constraints
+/// between two joints' angles, not joints of the tree ([`gearboxes`]). The tree's joints with
+/// every parent before its children, the closing joints and the floating links; a link or
+/// joint not tied to the world is reported.
 #[allow(clippy::type_complexity)]
 fn tree<'a, 'i>(
     cx: &mut Cx<'_>,
     links: &[Node<'a, 'i>],
-    joints: &[Node<'a, 'i>],
+    all_joints: &[Node<'a, 'i>],
+    out: &mut Imported,
 ) -> (Vec<Node<'a, 'i>>, Vec<Node<'a, 'i>>, Vec<Node<'a, 'i>>) {
-    for &j in joints {
+    for &j in all_joints {
         for t in ["parent", "child"] {
             match child(j, t) {
                 None => cx.error(
@@ -228,6 +237,12 @@ fn tree<'a, 'i>(
             }
         }
     }
+    let joints: Vec<Node<'a, 'i>> = all_joints
+        .iter()
+        .copied()
+        .filter(|j| j.attribute("type") != Some("gearbox"))
+        .collect();
+    // Link -> the joint that brought it into the tree (`None`: the world, a floating base).
     let mut in_tree: HashMap<String, Option<Node<'_, '_>>> = HashMap::new();
     in_tree.insert("world".into(), None);
     let floating: Vec<Node<'_, '_>> = links
@@ -243,7 +258,7 @@ fn tree<'a, 'i>(
     }
     let mut tree = Vec::new();
     let mut closing = Vec::new();
-    let mut left: Vec<Node<'_, '_>> = joints.to_vec();
+    let mut left: Vec<Node<'_, '_>> = joints.clone();
     loop {
         let before = left.len();
         left.retain(|&j| {
@@ -281,6 +296,106 @@ fn tree<'a, 'i>(
                 "",
                 "add a joint (fixed, to fix it) from `world` or another link",
             );
+        }
+    }
+
+    // A prismatic joint closing a loop takes the place of the joint that brought its child in,
+    // which closes the loop instead (a hinge, ball or weld loop).
+    let mut swapped = false;
+    let mut refused = Vec::new();
+    for slot in closing.iter_mut() {
+        let j = *slot;
+        if j.attribute("type") != Some("prismatic") {
+            continue;
+        }
+        let (p, c) = ends(j);
+        let jname = j.attribute("name").unwrap_or("");
+        let Some(&Some(t)) = in_tree.get(&c) else {
+            continue;
+        };
+        let tname = t.attribute("name").unwrap_or("");
+        // Whether the prismatic joint's parent hangs below its child: then the whole loop does,
+        // and no other joint of it can bring the child in.
+        let mut up = p.clone();
+        let mut below = false;
+        while let Some(Some(k)) = in_tree.get(&up) {
+            if up == c {
+                below = true;
+                break;
+            }
+            up = ends(*k).0;
+        }
+        let t_kind = t.attribute("type").unwrap_or("");
+        if below {
+            cx.error(
+                &cx.attr_range(j, "type"),
+                format!(
+                    "prismatic joint `{jname}` closes a loop that hangs below its own child `{c}`"
+                ),
+                "only this joint can close the loop",
+                &format!(
+                    "the model language has no prismatic loop: a loop through a prismatic joint is \
+                     imported with the prismatic joint as a coordinate and the loop closed at the \
+                     joint that brings the same link in; here `{p}` is reached through `{c}`, so \
+                     `{c}` cannot be brought in by `{jname}`"
+                ),
+            );
+            refused.push(j);
+            continue;
+        }
+        if !matches!(t_kind, "revolute" | "continuous" | "ball" | "fixed") {
+            cx.error(
+                &cx.attr_range(j, "type"),
+                format!(
+                    "prismatic joint `{jname}` closes a loop whose other joint at `{c}`, \
+                     `{tname}`, is a `{t_kind}` joint"
+                ),
+                "cannot close the loop",
+                &format!(
+                    "the model language has no prismatic loop: the loop is closed at the joint \
+                     that brings `{c}` into the tree, which must be a revolute, ball or fixed \
+                     joint (a hinge, ball or weld loop)"
+                ),
+            );
+            refused.push(j);
+            continue;
+        }
+        in_tree.insert(c.clone(), Some(j));
+        *slot = t;
+        swapped = true;
+        let (jn, tn) = (cx.joint_name(jname), cx.joint_name(tname));
+        out.notes.push(format!(
+            "prismatic joint `{jn}` closes a loop: it is a coordinate, and the loop closes at \
+             joint `{tn}` instead"
+        ));
+    }
+    // Reported once, here: not again as a joint that cannot close a loop.
+    closing.retain(|j| !refused.contains(j));
+    if swapped {
+        // Every parent before its children again, in the order of the file's joints.
+        let chosen: Vec<Node<'_, '_>> = joints
+            .iter()
+            .copied()
+            .filter(|&j| in_tree.get(&ends(j).1) == Some(&Some(j)))
+            .collect();
+        let mut placed: Vec<String> = in_tree
+            .iter()
+            .filter(|(_, v)| v.is_none())
+            .map(|(k, _)| k.clone())
+            .collect();
+        tree.clear();
+        loop {
+            let before = tree.len();
+            for &j in &chosen {
+                let (p, c) = ends(j);
+                if !tree.contains(&j) && placed.contains(&p) {
+                    tree.push(j);
+                    placed.push(c);
+                }
+            }
+            if tree.len() == before {
+                break;
+            }
         }
     }
 
@@ -427,13 +542,20 @@ fn loops<'a, 'i>(
                 continue;
             }
         };
+        // The axis is checked even where a pose failed (reported already).
+        let axis = match kind {
+            "hinge" => match axis_of(cx, j) {
+                Some(a) => Some(a),
+                None => continue,
+            },
+            _ => None,
+        };
         let (Some(pa), Some(ca)) = (abs_of(cx, frames, &p), abs_of(cx, frames, &c)) else {
             continue;
         };
         let mut at_child = joint_pose(cx, frames, j, &c, &ca);
         let mut axis_key = None;
-        if kind == "hinge" {
-            let Some(axis) = axis_of(cx, j) else { continue };
+        if let Some(axis) = axis {
             match geom::coordinate_axis(axis) {
                 Some((k, _)) => axis_key = Some(["x", "y", "z"][k]),
                 None => {
@@ -473,12 +595,169 @@ fn loops<'a, 'i>(
             ("a", side(cx, &p, &at_parent)),
             ("b", side(cx, &c, &at_child)),
         ];
-        if let Some(a) = axis_key {
+        // `z` is the default: left out, so a model file can make the loop another kind.
+        if let Some(a) = axis_key.filter(|a| *a != "z") {
             keys.push(("axis", quote(a)));
         }
         out.loops.push(LoopOut {
             keys,
             origin: cx.origin(j),
+        });
+    }
+}
+
+/// `gearbox` joints: a `coupling` between the angles of the two revolute joints that turn the
+/// gearbox's parent and child links against its `<gearbox_reference_body>`. SDFormat's
+/// `joint.sdf`: `theta_2 = -gearbox_ratio * theta_1`, `theta_1` the angle of the parent link
+/// against the reference body about `<axis>`, `theta_2` the child's about `<axis2>` (ratio 1 by
+/// default). With `q1`, `q2` those joints' coordinates, `theta = s q`, `s = ±1` as the joint's
+/// axis agrees with the gearbox's (compared in the model's frame with every joint at 0) and as
+/// the joint turns the link against the reference body (parent -> child) or the reference body
+/// against the link; the loop is `q2 = -gearbox_ratio s1 s2 q1` (offset 0: the angles count
+/// from the joints' zeros). The child's joint is not actuated (it follows the parent's).
+fn gearboxes<'a, 'i>(
+    cx: &mut Cx<'_>,
+    frames: &mut Frames<'a, 'i>,
+    links: &[Node<'a, 'i>],
+    joints: &[Node<'a, 'i>],
+    tree: &[Node<'a, 'i>],
+    out: &mut Imported,
+) {
+    for &g in joints {
+        if g.attribute("type") != Some("gearbox") {
+            continue;
+        }
+        let gname = g.attribute("name").unwrap_or("");
+        let name = cx.joint_name(gname);
+        let Some(rn) = child(g, "gearbox_reference_body") else {
+            cx.error(
+                &cx.attr_range(g, "type"),
+                format!("gearbox joint `{gname}` has no `<gearbox_reference_body>`"),
+                "`<gearbox_reference_body>LINK</gearbox_reference_body>` missing",
+                "the gearbox holds between the angles of its parent and child links, each \
+                 measured against this link",
+            );
+            continue;
+        };
+        let reference = rn.text().unwrap_or("").trim().to_string();
+        if reference != "world"
+            && !links
+                .iter()
+                .any(|k| k.attribute("name") == Some(&reference))
+        {
+            cx.error(
+                &rn.first_child().map_or_else(|| cx.tag(rn), |c| c.range()),
+                format!("unknown link `{reference}`"),
+                "no `<link>` of this name",
+                "",
+            );
+            continue;
+        }
+        let ratio_text = match child(g, "gearbox_ratio") {
+            None => "1".to_string(),
+            Some(n) => {
+                let Some(v) = cx.text_numbers(n, 1) else {
+                    continue;
+                };
+                if v[0].1 == 0.0 {
+                    cx.error(
+                        &n.first_child().map_or_else(|| cx.tag(n), |c| c.range()),
+                        format!("gearbox joint `{gname}` has ratio 0"),
+                        "holds the child's angle at 0",
+                        "the child's angle is -gearbox_ratio times the parent's; a fixed joint \
+                         holds a link",
+                    );
+                    continue;
+                }
+                number(&v[0].0, v[0].1)
+            }
+        };
+        let gabs = abs_of(cx, frames, gname);
+        let (p, c) = ends(g);
+        // Per side: the coordinate of the joint that turns the link against the reference
+        // body, and the sign of the gearbox's angle in it.
+        let mut sides = Vec::new();
+        for (link, tag, role) in [(&p, "axis", "parent"), (&c, "axis2", "child")] {
+            let t = tree.iter().copied().find(|&t| {
+                let (tp, tc) = ends(t);
+                (tp == reference && tc == *link) || (tp == *link && tc == reference)
+            });
+            let Some(t) =
+                t.filter(|t| matches!(t.attribute("type"), Some("revolute" | "continuous")))
+            else {
+                let e = child(g, role).unwrap_or(g);
+                cx.error(
+                    &e.first_child().map_or_else(|| cx.tag(e), |c| c.range()),
+                    format!(
+                        "gearbox joint `{gname}`: no revolute joint turns its {role} `{link}` \
+                         against the reference body `{reference}`"
+                    ),
+                    "no angle to couple",
+                    "a gearbox couples the angles of two revolute joints that join its parent \
+                     and its child to `<gearbox_reference_body>` (a joint that closes a loop \
+                     has no angle coordinate)",
+                );
+                continue;
+            };
+            let Some(u) = axis_in(cx, g, tag) else {
+                continue;
+            };
+            let Some(w) = axis_of(cx, t) else { continue };
+            let tname = t.attribute("name").unwrap_or("");
+            let (Some(ga), Some(ta)) = (gabs.clone(), abs_of(cx, frames, tname)) else {
+                continue;
+            };
+            let (u, w) = (geom::apply(&ga.r, u), geom::apply(&ta.r, w));
+            let dot = u[0] * w[0] + u[1] * w[1] + u[2] * w[2];
+            if (dot.abs() - 1.0).abs() > 1e-9 {
+                let x = child(g, tag).and_then(|a| child(a, "xyz")).unwrap_or(g);
+                cx.error(
+                    &x.first_child().map_or_else(|| cx.tag(x), |c| c.range()),
+                    format!(
+                        "the `<{tag}>` of gearbox joint `{gname}` is not the axis of joint \
+                         `{tname}`"
+                    ),
+                    &format!(
+                        "at {:.3} rad to `{tname}`'s axis",
+                        dot.clamp(-1.0, 1.0).acos()
+                    ),
+                    &format!(
+                        "the {role}'s angle is measured about `<{tag}>`: the axis of `{tname}`, \
+                         which turns `{link}` against `{reference}` (either sign)"
+                    ),
+                );
+                continue;
+            }
+            let turns_link = ends(t).0 == reference;
+            let s = dot.signum() * if turns_link { 1.0 } else { -1.0 };
+            sides.push((cx.joint_name(tname), s));
+        }
+        let [(q1, s1), (q2, s2)] = &sides[..] else {
+            continue;
+        };
+        // q2 = -ratio s1 s2 q1.
+        let ratio_out = if s1 * s2 > 0.0 {
+            match ratio_text.strip_prefix('-') {
+                Some(t) => t.to_string(),
+                None => format!("-{ratio_text}"),
+            }
+        } else {
+            ratio_text.clone()
+        };
+        out.notes.push(format!(
+            "gearbox joint `{name}` is a coupling {q2} = {ratio_out} * {q1} (SDF: the child's \
+             angle is -gearbox_ratio times the parent's, both against `{reference}`)"
+        ));
+        out.actuated.retain(|a| a != q2);
+        out.loops.push(LoopOut {
+            keys: vec![
+                ("name", quote(&name)),
+                ("kind", quote("coupling")),
+                ("a", quote(q2)),
+                ("b", quote(q1)),
+                ("ratio", ratio_out),
+            ],
+            origin: cx.origin(g),
         });
     }
 }
@@ -646,8 +925,18 @@ fn abs_of<'a, 'i>(cx: &mut Cx<'_>, f: &mut Frames<'a, 'i>, name: &str) -> Option
 
 /// The unit axis of a joint, in the joint's frame.
 fn axis_of(cx: &mut Cx<'_>, j: Node<'_, '_>) -> Option<[f64; 3]> {
-    let Some(x) = child(j, "axis").and_then(|a| child(a, "xyz")) else {
-        cx.error(&cx.tag(j), "the joint has no `<axis><xyz>`", "", "");
+    axis_in(cx, j, "axis")
+}
+
+/// The unit vector of a joint's `<axis>` or `<axis2>` (`tag`), in the joint's frame.
+fn axis_in(cx: &mut Cx<'_>, j: Node<'_, '_>, tag: &str) -> Option<[f64; 3]> {
+    let Some(x) = child(j, tag).and_then(|a| child(a, "xyz")) else {
+        cx.error(
+            &cx.tag(j),
+            format!("the joint has no `<{tag}><xyz>`"),
+            "",
+            "",
+        );
         return None;
     };
     if x.attribute("expressed_in").is_some_and(|e| !e.is_empty()) {
