@@ -335,57 +335,15 @@ fn bodies(cx: &mut Cx<'_>, root: Node<'_, '_>, tree: &Tree<'_, '_>, out: &mut Im
         if kind == "floating" {
             let name = cx.joint_name(j.attribute("name").unwrap_or(""));
             transforms.push(super::free_joint(&name, &Origin::default()).1);
-        } else if kind == "planar" {
-            let axis = match child(j, "axis") {
-                Some(a) => a
-                    .attribute_node("xyz")
-                    .and_then(|_| cx.numbers(a, "xyz", 3))
-                    .map(|v| [v[0].1, v[1].1, v[2].1]),
-                None => Some([1.0, 0.0, 0.0]),
-            };
-            let name = cx.joint_name(j.attribute("name").unwrap_or(""));
-            match axis.and_then(unit) {
-                Some(axis) => transforms.extend(planar_steps(&name, axis)),
-                None if axis.is_some() => {
-                    let a = child(j, "axis").unwrap_or(j);
-                    cx.error(
-                        &cx.attr_range(a, "xyz"),
-                        "the joint's axis is zero",
-                        "no direction",
-                        "",
-                    );
-                }
-                None => {}
-            }
-        } else if kind != "fixed" {
-            let axis = match child(j, "axis") {
-                Some(a) => a
-                    .attribute_node("xyz")
-                    .and_then(|_| cx.numbers(a, "xyz", 3))
-                    .map(|v| [v[0].1, v[1].1, v[2].1]),
-                None => Some([1.0, 0.0, 0.0]),
-            };
-            match axis.and_then(unit) {
-                Some(axis) => {
-                    let k = if kind == "prismatic" {
-                        "prismatic"
-                    } else {
-                        "revolute"
-                    };
-                    let q = cx.joint_name(j.attribute("name").unwrap_or(""));
-                    transforms.extend(joint_steps(k, &q, axis));
-                }
-                None if axis.is_some() => {
-                    let a = child(j, "axis").unwrap_or(j);
-                    cx.error(
-                        &cx.attr_range(a, "xyz"),
-                        "the joint's axis is zero",
-                        "no direction",
-                        "",
-                    );
-                }
-                None => {}
-            }
+        } else if kind != "fixed"
+            && let Some(axis) = joint_axis(cx, j)
+        {
+            let q = cx.joint_name(j.attribute("name").unwrap_or(""));
+            transforms.extend(match kind {
+                "planar" => planar_steps(&q, axis),
+                "prismatic" => joint_steps("prismatic", &q, axis),
+                _ => joint_steps("revolute", &q, axis),
+            });
         }
         if transforms.is_empty() {
             transforms.push(quote("Tz(0)"));
@@ -504,4 +462,27 @@ fn planar_steps(name: &str, axis: [f64; 3]) -> Vec<String> {
     out.extend(steps);
     out.push(format!("{{ inverse = [{aa}] }}"));
     out
+}
+
+/// A moving joint's unit axis: `<axis xyz>` (URDF's default `1 0 0` without `<axis>`); `None`
+/// after an error (a zero axis) or when `xyz` could not be read (reported where it was read).
+fn joint_axis(cx: &mut Cx<'_>, j: Node<'_, '_>) -> Option<[f64; 3]> {
+    let axis = match child(j, "axis") {
+        Some(a) => a
+            .attribute_node("xyz")
+            .and_then(|_| cx.numbers(a, "xyz", 3))
+            .map(|v| [v[0].1, v[1].1, v[2].1]),
+        None => Some([1.0, 0.0, 0.0]),
+    };
+    let unit_axis = axis.and_then(unit);
+    if unit_axis.is_none() && axis.is_some() {
+        let a = child(j, "axis").unwrap_or(j);
+        cx.error(
+            &cx.attr_range(a, "xyz"),
+            "the joint's axis is zero",
+            "no direction",
+            "",
+        );
+    }
+    unit_axis
 }
