@@ -29,6 +29,8 @@ type Out = *mut f64;
 type Fn1 = unsafe extern "C" fn(H, In, Out) -> c_int;
 /// `f(h, a, b, out)`: ik, fk, the velocities, gamma, psi, energy.
 type Fn2 = unsafe extern "C" fn(H, In, In, Out) -> c_int;
+/// `f(h, a, b, c, out0, ..., out7)`: the derivatives of forward and inverse dynamics.
+type Fn3x8 = unsafe extern "C" fn(H, In, In, In, Out, Out, Out, Out, Out, Out, Out, Out) -> c_int;
 
 /// `Api`: one function pointer per function of the C ABI's table (rbss-abi), of the table's
 /// type, looked up by name when a library is loaded.
@@ -472,6 +474,40 @@ impl Robot {
             });
         }
         Ok(out)
+    }
+
+    /// One call of a derivative function (three inputs, eight outputs) per row: the outputs
+    /// shaped by `shapes` (vectors, or column-major rows x cols matrices) in a dict under `keys`.
+    fn derivative_dict<'py>(
+        &self,
+        py: Python<'py>,
+        f: Fn3x8,
+        ins: &[(&Bound<'py, PyAny>, usize, &str); 3],
+        shapes: &[(usize, Option<usize>); 8],
+        keys: [&str; 8],
+    ) -> PyResult<Bound<'py, PyAny>> {
+        // SAFETY: as in `one`: the outputs hold the lengths of rbss.h.
+        let outs = self.shaped_rows(py, ins, shapes, |h, c, r| unsafe {
+            f(
+                h,
+                c.input(0, r),
+                c.input(1, r),
+                c.input(2, r),
+                c.output(0, r),
+                c.output(1, r),
+                c.output(2, r),
+                c.output(3, r),
+                c.output(4, r),
+                c.output(5, r),
+                c.output(6, r),
+                c.output(7, r),
+            )
+        })?;
+        let d = PyDict::new(py);
+        for (k, v) in keys.into_iter().zip(outs) {
+            d.set_item(k, v)?;
+        }
+        Ok(d.into_any())
     }
 
     /// A column-major (m x n) kernel per row as numpy's (m, n) (or (k, m, n)), a view.
@@ -932,23 +968,6 @@ impl Robot {
             (m, Some(n)),
             (m, Some(a)),
         ];
-        // SAFETY: as in `one`: the outputs hold the lengths of rbss.h.
-        let outs = self.shaped_rows(py, &ins, &shapes, |h, c, r| unsafe {
-            f(
-                h,
-                c.input(0, r),
-                c.input(1, r),
-                c.input(2, r),
-                c.output(0, r),
-                c.output(1, r),
-                c.output(2, r),
-                c.output(3, r),
-                c.output(4, r),
-                c.output(5, r),
-                c.output(6, r),
-                c.output(7, r),
-            )
-        })?;
         let keys = [
             "xddot",
             "lambda",
@@ -959,11 +978,7 @@ impl Robot {
             "dlambda_dxdot",
             "dlambda_du",
         ];
-        let d = PyDict::new(py);
-        for (k, v) in keys.into_iter().zip(outs) {
-            d.set_item(k, v)?;
-        }
-        Ok(d.into_any())
+        self.derivative_dict(py, f, &ins, &shapes, keys)
     }
 
     /// Inverse dynamics at the motion (x, xdot, xddot) and its derivatives
@@ -994,23 +1009,6 @@ impl Robot {
             (m, Some(n)),
             (m, Some(n)),
         ];
-        // SAFETY: as in `one`: the outputs hold the lengths of rbss.h.
-        let outs = self.shaped_rows(py, &ins, &shapes, |h, c, r| unsafe {
-            f(
-                h,
-                c.input(0, r),
-                c.input(1, r),
-                c.input(2, r),
-                c.output(0, r),
-                c.output(1, r),
-                c.output(2, r),
-                c.output(3, r),
-                c.output(4, r),
-                c.output(5, r),
-                c.output(6, r),
-                c.output(7, r),
-            )
-        })?;
         let keys = [
             "u",
             "lambda",
@@ -1021,11 +1019,7 @@ impl Robot {
             "dlambda_dxdot",
             "dlambda_dxddot",
         ];
-        let d = PyDict::new(py);
-        for (k, v) in keys.into_iter().zip(outs) {
-            d.set_item(k, v)?;
-        }
-        Ok(d.into_any())
+        self.derivative_dict(py, f, &ins, &shapes, keys)
     }
 
     /// (A, B) of d/dt [y; ydot] = A [y; ydot] + B U, forward dynamics linearised on the
