@@ -12,7 +12,7 @@
 mod common;
 
 use common::XorShift;
-use rbss_runtime::integrate::{IntegrateOptions, Method, Simulator, Stabilization};
+use rbss_runtime::integrate::Stabilization;
 use rbss_runtime::tasks::{Derivatives, Simulate};
 use rbss_runtime::{
     Baumgarte, Data, Model, StepDerivatives, rk4_step_derivatives, semi_implicit_euler_step,
@@ -163,35 +163,14 @@ fn against_simulator<K: Derivatives<N, M> + Simulate<N, M>, const N: usize, cons
     } else {
         Stabilization::Baumgarte(b)
     };
-    let mut data = Data::new(model);
-    let mut sim = Simulator::new(
-        model,
-        &mut data,
-        0.0,
-        &x0,
-        &v0,
-        IntegrateOptions::new(Method::Rk4 { dt }, stab),
-    )
-    .unwrap();
-    // The simulator's (projected) start.
-    let (xs, vs) = (*sim.x(), *sim.xdot());
-    let mut control = |_t: f64, _x: &[f64; N], _v: &[f64; N], uu: &mut [f64]| {
-        uu.copy_from_slice(&u);
-        Ok(())
-    };
-    sim.step(model, &mut data, dt, &mut control).unwrap();
+    let ((xs, vs), (x1, v1)) = common::simulator_rk4_step(model, &x0, &v0, &u, dt, stab);
     let mut d = Data::new(model);
     d.x = xs;
     d.xdot = vs;
     let mut out = StepDerivatives::new();
     rk4_step_derivatives(model, &mut d, &mut out, &u, dt, b).unwrap();
     let (mut err, mut size) = (0.0_f64, 0.0_f64);
-    for (a, c) in sim
-        .x()
-        .iter()
-        .chain(sim.xdot())
-        .zip(out.x.iter().chain(&out.xdot))
-    {
+    for (a, c) in x1.iter().chain(&v1).zip(out.x.iter().chain(&out.xdot)) {
         err = err.max((a - c).abs());
         size = size.max(a.abs());
     }

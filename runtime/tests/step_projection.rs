@@ -16,7 +16,7 @@
 mod common;
 
 use common::XorShift;
-use rbss_runtime::integrate::{IntegrateOptions, Method, Simulator, Stabilization};
+use rbss_runtime::integrate::Stabilization;
 use rbss_runtime::tasks::{Derivatives, Jacobian, Simulate};
 use rbss_runtime::{
     Baumgarte, Data, Model, SolverOptions, StepDerivatives, project_position,
@@ -229,32 +229,13 @@ fn against_simulator<K: Derivatives<N, M> + Simulate<N, M>, const N: usize, cons
     let dt = 1e-2;
     let (x0, v0) = on_manifold(model, &mut XorShift(0x5eed_0000_0000_0001));
     let u: Vec<f64> = (0..na).map(|a| 0.5 + 0.1 * a as f64).collect();
-    let mut data = Data::new(model);
-    let mut sim = Simulator::new(
-        model,
-        &mut data,
-        0.0,
-        &x0,
-        &v0,
-        IntegrateOptions::new(Method::Rk4 { dt }, Stabilization::Projection),
-    )
-    .unwrap();
-    let (xs, vs) = (*sim.x(), *sim.xdot());
-    let mut control = |_t: f64, _x: &[f64; N], _v: &[f64; N], uu: &mut [f64]| {
-        uu.copy_from_slice(&u);
-        Ok(())
-    };
-    sim.step(model, &mut data, dt, &mut control).unwrap();
+    let ((xs, vs), (x1, v1)) =
+        common::simulator_rk4_step(model, &x0, &v0, &u, dt, Stabilization::Projection);
     let mut out = StepDerivatives::new();
     raw(model, Step::Rk4, &xs, &vs, &u, dt, &mut out);
     project_step_derivatives(model, &mut Data::new(model), &mut out).unwrap();
     let (mut err, mut size) = (0.0_f64, 0.0_f64);
-    for (a, c) in sim
-        .x()
-        .iter()
-        .chain(sim.xdot())
-        .zip(out.x.iter().chain(&out.xdot))
-    {
+    for (a, c) in x1.iter().chain(&v1).zip(out.x.iter().chain(&out.xdot)) {
         err = err.max((a - c).abs());
         size = size.max(a.abs());
     }

@@ -48,3 +48,39 @@ pub fn random_stewart_pose(rng: &mut XorShift) -> [f64; 6] {
         rng.range(-0.15, 0.15),
     ]
 }
+
+/// One RK4 step of `dt` of the integrator (`Simulator`, `Method::Rk4`, `stab`) from `(x0, v0)`
+/// with the control forces `u` held: the simulator's start (projected onto the constraints by
+/// `Simulator::new`) and the state after the step, each `(X, Ẋ)`.
+#[allow(clippy::type_complexity)]
+pub fn simulator_rk4_step<
+    K: rbss_runtime::tasks::Simulate<N, M>,
+    const N: usize,
+    const M: usize,
+>(
+    model: &rbss_runtime::Model<K, N, M>,
+    x0: &[f64; N],
+    v0: &[f64; N],
+    u: &[f64],
+    dt: f64,
+    stab: rbss_runtime::integrate::Stabilization,
+) -> (([f64; N], [f64; N]), ([f64; N], [f64; N])) {
+    use rbss_runtime::integrate::{IntegrateOptions, Method, Simulator};
+    let mut data = rbss_runtime::Data::new(model);
+    let mut sim = Simulator::new(
+        model,
+        &mut data,
+        0.0,
+        x0,
+        v0,
+        IntegrateOptions::new(Method::Rk4 { dt }, stab),
+    )
+    .unwrap();
+    let start = (*sim.x(), *sim.xdot());
+    let mut control = |_t: f64, _x: &[f64; N], _v: &[f64; N], uu: &mut [f64]| {
+        uu.copy_from_slice(u);
+        Ok(())
+    };
+    sim.step(model, &mut data, dt, &mut control).unwrap();
+    (start, (*sim.x(), *sim.xdot()))
+}
