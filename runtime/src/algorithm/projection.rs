@@ -156,9 +156,7 @@ pub fn project_velocity<K: Jacobian<N, M>, const N: usize, const M: usize>(
     // Ẋ := Q₂ Q₂ᵀ Ẋ: Qᵀ Ẋ with its first M entries zeroed, times Q.
     let qr = qr.as_flattened();
     *v = *xdot;
-    linalg::apply_q(qr, N, &work[0], M, v, true);
-    v[..M].fill(0.0);
-    linalg::apply_q(qr, N, &work[0], M, v, false);
+    tangent::<N, M>(qr, &work[0], v);
     check_finite("projected velocity", v)?;
     mat_vec(g, v, mu);
     let residual = max_abs(mu);
@@ -169,6 +167,14 @@ pub fn project_velocity<K: Jacobian<N, M>, const N: usize, const M: usize>(
         residual,
         cond,
     })
+}
+
+/// `v := P v = Q₂ Q₂ᵀ v`, the orthogonal projection onto `null(G)`, from the pivoted QR of `Gᵀ`
+/// (N × M column-major, as `factor_qr` writes it) and its reflectors' factors `tau`.
+pub(super) fn tangent<const N: usize, const M: usize>(qr: &[f64], tau: &[f64], v: &mut [f64]) {
+    linalg::apply_q(qr, N, tau, M, v, true);
+    v[..M].fill(0.0);
+    linalg::apply_q(qr, N, tau, M, v, false);
 }
 
 /// A state's consistency with the constraints, `[max |f(X)|, max |G(X) Ẋ|]`, without moving

@@ -29,7 +29,7 @@
 //! [`project_position`]: super::projection::project_position
 
 use super::input::{check_finite, max_abs};
-use super::projection::{factor_qr, project_position_with, project_velocity};
+use super::projection::{factor_qr, project_position_with, project_velocity, tangent};
 use super::step::StepDerivatives;
 use crate::data::Data;
 use crate::error::SolverError;
@@ -120,12 +120,7 @@ pub fn project_step_derivatives<
     let tau = work[0];
     let qr = qr.as_flattened();
     // mu = P R⁻¹ R⁻ᵀ Pᵀ (G Ẋ⁺).
-    let mut rt = [0.0; M];
-    for i in 0..M {
-        let r = &qr[i * N..i * N + i];
-        rt[i] = (gv[piv[i]] - linalg::dot4(r, &rt[..i])) / qr[i + i * N];
-    }
-    let mu = gram_solve::<N, M>(qr, &piv, &rt);
+    let mu = gram_solve::<N, M>(qr, &piv, &rt_solve::<N, M>(qr, &piv, &gv));
     sc.contract(k, &x_star, &v_star, &mu);
     for col in jac.chunks_exact_mut(n2) {
         let (dx, dv) = col.split_at_mut(N);
@@ -251,13 +246,6 @@ impl<const N: usize, const M: usize> Scratch<N, M> {
     }
 }
 
-/// `v := P v = Q₂ Q₂ᵀ v` (the QR of `Gᵀ`, N × M column-major, and its reflectors' factors).
-fn tangent<const N: usize, const M: usize>(qr: &[f64], tau: &[f64], v: &mut [f64]) {
-    linalg::apply_q(qr, N, tau, M, v, true);
-    v[..M].fill(0.0);
-    linalg::apply_q(qr, N, tau, M, v, false);
-}
-
 /// `G⁺ w = Gᵀ (G Gᵀ)⁻¹ w = Q₁ R⁻ᵀ Pᵀ w`.
 fn pinv_apply<const N: usize, const M: usize>(
     qr: &[f64],
@@ -266,12 +254,19 @@ fn pinv_apply<const N: usize, const M: usize>(
     w: &[f64; M],
 ) -> [f64; N] {
     let mut z = [0.0; N];
-    for i in 0..M {
-        let r = &qr[i * N..i * N + i];
-        z[i] = (w[piv[i]] - linalg::dot4(r, &z[..i])) / qr[i + i * N];
-    }
+    z[..M].copy_from_slice(&rt_solve::<N, M>(qr, piv, w));
     linalg::apply_q(qr, N, tau, M, &mut z, false);
     z
+}
+
+/// `R⁻ᵀ Pᵀ y` (forward substitution with the QR's `R`, the pivoted entries of `y`).
+fn rt_solve<const N: usize, const M: usize>(qr: &[f64], piv: &[usize], y: &[f64; M]) -> [f64; M] {
+    let mut t = [0.0; M];
+    for i in 0..M {
+        let r = &qr[i * N..i * N + i];
+        t[i] = (y[piv[i]] - linalg::dot4(r, &t[..i])) / qr[i + i * N];
+    }
+    t
 }
 
 /// `(G Gᵀ)⁻¹ y = P R⁻¹ R⁻ᵀ Pᵀ y` from `rt = R⁻ᵀ Pᵀ y`.
