@@ -8,7 +8,7 @@ use std::io::Write as _;
 use crate::robot_arg::RobotArg;
 use crate::{kinematics, robots};
 use clap::{Parser, Subcommand};
-use rbss_runtime::{Dynamics, Model};
+use rbss_runtime::{Dynamics, DynamicsDerivatives, Model};
 
 /// A line of the command's results, into the text `run` returns for stdout.
 macro_rules! out {
@@ -740,8 +740,46 @@ fn list_line<K: Dynamics<N, M>, const N: usize, const M: usize>(
 
 /// Runs a subcommand that takes `--model` (or `--model-file`) on `model`, whichever robot the
 /// option named: the one place that dispatches them, for the robots compiled into the
-/// command (through `with_robot!`) and for a robot's library (`export_command!`).
-pub fn run_with_model<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>(
+/// command (through `with_robot!`) and for a robot's library (`export_command!`). The
+/// subcommands that take derivatives (and the studies) are here; the others are
+/// [`run_without_derivatives`]'s.
+pub fn run_with_model<K: DynamicsDerivatives<N, M> + Clone, const N: usize, const M: usize>(
+    cmd: Cmd,
+    model: Model<K, N, M>,
+    stdout: &mut String,
+) -> Result<(), String> {
+    match cmd {
+        Cmd::Linearize {
+            state,
+            coordinates,
+            check,
+            ..
+        } => {
+            let json = crate::simulate::linearize(
+                &model,
+                &state,
+                &check.check()?,
+                coordinates == CoordinatesArg::Actuated,
+            )?;
+            out!(stdout, "{json}");
+            Ok(())
+        }
+        Cmd::IdDerivatives { state, check, .. } => {
+            let json = crate::simulate::id_derivatives(&model, &state, &check.check()?)?;
+            out!(stdout, "{json}");
+            Ok(())
+        }
+        #[cfg(feature = "studies")]
+        Cmd::Bench(cmd) => crate::bench::command(cmd, &model),
+        cmd => run_without_derivatives(cmd, model, stdout),
+    }
+}
+
+/// [`run_with_model`] for a robot generated without the derivative kernel (the library `rbss
+/// --model-file` builds for the subcommands that take no derivatives): every subcommand but
+/// those that need it, which are an error here (the command builds the model's library with
+/// derivatives for them, [`crate::model_file::Variant::for_command`]).
+pub fn run_without_derivatives<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>(
     cmd: Cmd,
     model: Model<K, N, M>,
     stdout: &mut String,
@@ -796,26 +834,11 @@ pub fn run_with_model<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>
             out!(stdout, "{}", ev.json);
             failed_states(&states, &ev, strict, true)
         }
-        Cmd::Linearize {
-            state,
-            coordinates,
-            check,
-            ..
-        } => {
-            let json = crate::simulate::linearize(
-                &model,
-                &state,
-                &check.check()?,
-                coordinates == CoordinatesArg::Actuated,
-            )?;
-            out!(stdout, "{json}");
-            Ok(())
-        }
-        Cmd::IdDerivatives { state, check, .. } => {
-            let json = crate::simulate::id_derivatives(&model, &state, &check.check()?)?;
-            out!(stdout, "{json}");
-            Ok(())
-        }
+        Cmd::Linearize { .. } | Cmd::IdDerivatives { .. } => Err(format!(
+            "robot `{}` was generated without its derivative kernel (`rbss-codegen \
+             --no-derivatives`): this subcommand needs it",
+            model.structure().name
+        )),
         Cmd::Fd {
             state,
             check,
@@ -897,7 +920,11 @@ pub fn run_with_model<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>
             Ok(())
         }
         #[cfg(feature = "studies")]
-        Cmd::Bench(cmd) => crate::bench::command(cmd, &model),
+        Cmd::Bench(_) => Err(format!(
+            "robot `{}` was generated without its derivative kernel: `rbss bench` needs the \
+             model's studies library",
+            model.structure().name
+        )),
         _ => Err("this subcommand takes no --model".to_string()),
     }
 }
@@ -939,6 +966,13 @@ impl Cmd {
             Cmd::List { model_file, .. } => model_file.as_deref(),
             _ => self.robot().and_then(|r| r.model_file.as_deref()),
         }
+    }
+
+    /// Whether it needs the robot's derivative kernel (`rbss linearize`, `rbss id-derivatives`):
+    /// then its `--model-file` library is the model's full one
+    /// ([`crate::model_file::Variant::Full`]).
+    pub fn needs_derivatives(&self) -> bool {
+        matches!(self, Cmd::Linearize { .. } | Cmd::IdDerivatives { .. })
     }
 
     /// Whether its `--model-file` library needs the studies (`rbss bench`): then the
@@ -998,10 +1032,26 @@ pub fn finish(result: Result<(), String>, stdout: &str) -> u8 {
 /// The command line `args` (with the program name first) run on `model`: what a robot's
 /// library does for `rbss SUBCOMMAND --model-file PATH ...` (see
 /// [`crate::export_command!`]). The exit status, as the command's.
-pub fn main_with_model<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>(
+pub fn main_with_model<K: DynamicsDerivatives<N, M> + Clone, const N: usize, const M: usize>(
     args: &[String],
     model: Model<K, N, M>,
 ) -> u8 {
+    main_with(args, |cmd, stdout| run_with_model(cmd, model, stdout))
+}
+
+/// [`main_with_model`] for a robot generated without the derivative kernel
+/// ([`run_without_derivatives`]).
+pub fn main_without_derivatives<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>(
+    args: &[String],
+    model: Model<K, N, M>,
+) -> u8 {
+    main_with(args, |cmd, stdout| {
+        run_without_derivatives(cmd, model, stdout)
+    })
+}
+
+/// Parses `args` and runs the subcommand with `run`: the exit status.
+fn main_with(args: &[String], run: impl FnOnce(Cmd, &mut String) -> Result<(), String>) -> u8 {
     let cli = match Cli::try_parse_from(args) {
         Ok(c) => c,
         Err(e) => {
@@ -1010,6 +1060,6 @@ pub fn main_with_model<K: Dynamics<N, M> + Clone, const N: usize, const M: usize
         }
     };
     let mut stdout = String::new();
-    let result = run_with_model(cli.cmd, model, &mut stdout);
+    let result = run(cli.cmd, &mut stdout);
     finish(result, &stdout)
 }

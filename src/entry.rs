@@ -22,10 +22,18 @@ pub unsafe fn args(argc: c_int, argv: *const *const c_char) -> Vec<String> {
 
 /// The command's entry in a robot's library (with `rbss_ffi::export!`, what `--model-file`
 /// builds): `rbss_command(argc, argv)` runs the command line on the robot `$krate::$ty` and
-/// returns the exit status; `rbss_cache_key()` is `$key`, the cache entry's.
+/// returns the exit status; `rbss_cache_key()` is `$key`, the cache entry's. With
+/// `without_derivatives`, for a robot generated without its derivative kernel
+/// ([`crate::cli::main_without_derivatives`]: the subcommands that need it are errors).
 #[macro_export]
 macro_rules! export_command {
     ($krate:ident :: $ty:ident, $key:expr) => {
+        $crate::export_command!(@ $krate :: $ty, $key, main_with_model);
+    };
+    ($krate:ident :: $ty:ident, $key:expr, without_derivatives) => {
+        $crate::export_command!(@ $krate :: $ty, $key, main_without_derivatives);
+    };
+    (@ $krate:ident :: $ty:ident, $key:expr, $main:ident) => {
         /// # Safety
         /// `argv` holds `argc` NUL-terminated strings.
         #[unsafe(no_mangle)]
@@ -38,7 +46,7 @@ macro_rules! export_command {
                 let model = ::rbss_runtime::Model::new(
                     <$krate::$ty as ::core::default::Default>::default(),
                 );
-                ::std::ffi::c_int::from($crate::cli::main_with_model(&args, model))
+                ::std::ffi::c_int::from($crate::cli::$main(&args, model))
             })
             .unwrap_or(101)
         }

@@ -30,10 +30,13 @@
 //! size bound (`RBSS_CACHE_MAX_SIZE`, 2 GiB), and `rbss cache list|prune|clear` shows and
 //! shrinks the cache (docs/cache.md).
 //!
-//! `rbss bench --model-file` uses the model's studies variant ([`Variant::Studies`]: the
-//! command's library with its feature `studies`, the key with a part of its own), built on
-//! its first use only, so that the other subcommands' first run does not compile the studies
-//! (BENCHMARKS.md, issue 22).
+//! A model has three libraries ([`Variant`]), each built on its first use: the plain one (the
+//! robot without its derivative kernel, behind the command alone) for the subcommands that take
+//! no derivatives, so that their first run does not compile the largest kernel; the full one
+//! (every kernel and the C ABI) for `rbss linearize`, `rbss id-derivatives` and `rbss library`;
+//! the studies one for `rbss bench --model-file` (the full one with the command's feature
+//! `studies`, so that the other subcommands' first run does not compile the studies: BENCHMARKS.md,
+//! issue 22). The key has a part naming the variant.
 //!
 //! Where: `$RBSS_CACHE`, else `$XDG_CACHE_HOME/rbss`, else `~/.cache/rbss`; cargo's build
 //! directory for the entries (shared by all, so the runtime and its dependencies are compiled
@@ -56,12 +59,31 @@ pub use rbss_ffi::ABI_VERSION;
 /// The rbss sources this command was built from.
 const SOURCE: &str = env!("CARGO_MANIFEST_DIR");
 
-/// Which library of a model: the plain one (every subcommand but the studies) or the one
-/// that also runs `rbss bench` (the command's library with its feature `studies`).
+/// Which library of a model. The subcommands that take no derivatives run in the plain one:
+/// the robot generated without its derivative kernel (`rbss-codegen --no-derivatives`) behind
+/// the command alone, which compiles in about a third of the time of the full one for a legged
+/// robot (the kernel is three quarters of its generated code; BENCHMARKS.md). The full one
+/// (every kernel, the C ABI of `ffi/include/rbss.h`) serves `rbss linearize`, `rbss
+/// id-derivatives` and `rbss library` (C and Python); the studies one (the full one with the
+/// command's feature `studies`) `rbss bench`. Each is built on its first use.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Variant {
     Plain,
+    Full,
     Studies,
+}
+
+impl Variant {
+    /// The variant a subcommand runs in.
+    pub fn for_command(cmd: &crate::cli::Cmd) -> Variant {
+        if cmd.is_study() {
+            Variant::Studies
+        } else if cmd.needs_derivatives() {
+            Variant::Full
+        } else {
+            Variant::Plain
+        }
+    }
 }
 
 /// The cache: where entries live, where cargo builds, with which tools.
@@ -192,7 +214,8 @@ pub fn run(path: &str, variant: Variant, args: &[String]) -> Result<u8, String> 
     lib.command(args)
 }
 
-/// The library of the model file `model`: loaded from its cache entry, or built into it first
+/// The full library of the model file `model` (every kernel and the C ABI: [`Variant::Full`]):
+/// loaded from its cache entry, or built into it first
 /// (and rebuilt when the entry is incomplete, corrupt or of another version). `progress`
 /// gets a line per step of a build, and while another process builds the same entry.
 pub fn load(
@@ -200,7 +223,7 @@ pub fn load(
     model: &Path,
     progress: &mut dyn FnMut(&str),
 ) -> Result<Library, String> {
-    load_variant(cache, model, Variant::Plain, progress)
+    load_variant(cache, model, Variant::Full, progress)
 }
 
 /// The files a model's library is built from, each read once: the model file, the source it
@@ -858,8 +881,10 @@ fn model_key(inputs: &Inputs, variant: Variant) -> String {
     part("rbss", env!("CARGO_PKG_VERSION").as_bytes());
     part("abi", &ABI_VERSION.to_le_bytes());
     // The plain library's key has no such part.
-    if variant == Variant::Studies {
-        part("variant", b"studies");
+    match variant {
+        Variant::Plain => {}
+        Variant::Full => part("variant", b"full"),
+        Variant::Studies => part("variant", b"studies"),
     }
     hex(&h.finalize()[..16])
 }
@@ -1017,19 +1042,19 @@ fn manifest_string(manifest: &str, key: &str) -> Option<String> {
 
 /// Writes the robot's crate of `model` to `dir`: the generator in this process, or the command
 /// `$RBSS_CODEGEN` names. Errors are the generator's diagnostics (file, line and column).
-fn generate(cache: &Cache, model: &Path, dir: &Path) -> Result<(), String> {
+fn generate(cache: &Cache, model: &Path, variant: Variant, dir: &Path) -> Result<(), String> {
+    let no_derivatives = variant == Variant::Plain;
     if let Some(codegen) = &cache.codegen {
-        let out = Command::new(codegen)
-            .arg("--out")
-            .arg(dir)
-            .arg(model)
-            .output()
-            .map_err(|e| {
-                format!(
-                    "cannot run the generator `{}` (RBSS_CODEGEN): {e}",
-                    codegen.display()
-                )
-            })?;
+        let mut cmd = Command::new(codegen);
+        if no_derivatives {
+            cmd.arg("--no-derivatives");
+        }
+        let out = cmd.arg("--out").arg(dir).arg(model).output().map_err(|e| {
+            format!(
+                "cannot run the generator `{}` (RBSS_CODEGEN): {e}",
+                codegen.display()
+            )
+        })?;
         if !out.status.success() {
             return Err(String::from_utf8_lossy(&out.stderr).trim_end().to_string());
         }
@@ -1046,7 +1071,10 @@ fn generate(cache: &Cache, model: &Path, dir: &Path) -> Result<(), String> {
         rbss_codegen::generate_with_runtime(
             &model_path,
             &source,
-            &rbss_codegen::Options::default(),
+            &rbss_codegen::Options {
+                no_derivatives,
+                ..Default::default()
+            },
             &runtime,
             // The progress lines (and warnings) are the generator command's; the library's
             // build says its own.
@@ -1078,7 +1106,7 @@ fn build_in(
     let t0 = std::time::Instant::now();
     let robot_dir = tmp.join("robot");
     progress(&format!("generating {} ...", model.display()));
-    generate(cache, model, &robot_dir)?;
+    generate(cache, model, variant, &robot_dir)?;
     let manifest_text = fs::read_to_string(robot_dir.join("rbss-manifest.toml"))
         .map_err(|e| format!("{}: no manifest: {e}", robot_dir.display()))?;
     let manifest = toml::de::DeTable::parse(&manifest_text)
@@ -1141,9 +1169,19 @@ fn build_in(
              (rbss.h) and the command.\n\
              #[path = {module_path:?}]\n\
              pub mod {name};\n\
-             ::rbss_ffi::export!({name}::{ty}, dynamics);\n\
-             ::rbss::export_command!({name}::{ty}, \"{key}\");\n",
+             {exports}",
             model = inputs.path.display(),
+            exports = match variant {
+                // The command alone (and the ABI version the loader checks).
+                Variant::Plain => format!(
+                    "::rbss_ffi::export!({name}::{ty}, version);\n\
+                     ::rbss::export_command!({name}::{ty}, \"{key}\", without_derivatives);\n"
+                ),
+                Variant::Full | Variant::Studies => format!(
+                    "::rbss_ffi::export!({name}::{ty}, dynamics);\n\
+                     ::rbss::export_command!({name}::{ty}, \"{key}\");\n"
+                ),
+            },
         ),
     )
     .map_err(|e| format!("{}: {e}", robot_rs.display()))?;
@@ -1151,7 +1189,8 @@ fn build_in(
     progress(&format!(
         "compiling robot `{name}`{} (cargo, in {}) ...",
         match variant {
-            Variant::Plain => "",
+            Variant::Plain => " without derivatives",
+            Variant::Full => "",
             Variant::Studies => " with the studies",
         },
         cache.target.display()

@@ -21,7 +21,8 @@
 use std::path::Path;
 
 use rbss_runtime::{
-    Baumgarte, Data, Dynamics, IntegrateOptions, Method, Model, Simulator, gear_ratio,
+    Baumgarte, Data, Dynamics, DynamicsDerivatives, IntegrateOptions, Method, Model, Simulator,
+    gear_ratio,
 };
 use serde::{Deserialize, Serialize};
 
@@ -531,7 +532,7 @@ fn rows_of(
 /// derivatives of `Xddot` and `lambda` with respect to `X`, `Xdot` and `U`. The state is
 /// checked (or projected) as `rbss fd` does; a failure (a singular saddle-point system, a
 /// singularity of the chosen coordinates) is an error.
-pub fn linearize<K: Dynamics<N, M>, const N: usize, const M: usize>(
+pub fn linearize<K: DynamicsDerivatives<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     path: &str,
     check: &StateCheck,
@@ -643,7 +644,7 @@ struct IdDerivativesOut {
 /// runtime's [`rbss_runtime::inverse_dynamics_derivatives`], the applied forces held), as JSON.
 /// `X` and `Xdot` are checked (or projected) as `rbss fd` does; `Xddot` is used as given (the
 /// derivatives hold off the acceleration constraint too). A singular `[S | Gᵀ]` is an error.
-pub fn id_derivatives<K: Dynamics<N, M>, const N: usize, const M: usize>(
+pub fn id_derivatives<K: DynamicsDerivatives<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     path: &str,
     check: &StateCheck,

@@ -17,9 +17,10 @@ use std::path::Path;
 use std::time::Instant;
 
 use rbss_runtime::{
-    Baumgarte, Data, Dynamics, Kernels, Model, Structure, forward_acceleration, forward_dynamics,
-    forward_kinematics, forward_velocity, inverse_acceleration, inverse_dynamics,
-    inverse_dynamics_full, inverse_kinematics, inverse_velocity,
+    Baumgarte, Data, Dynamics, DynamicsDerivatives, Kernels, Model, Structure,
+    forward_acceleration, forward_dynamics, forward_kinematics, forward_velocity,
+    inverse_acceleration, inverse_dynamics, inverse_dynamics_full, inverse_kinematics,
+    inverse_velocity,
 };
 
 /// The kernels a solver may call, in the order of the counters.
@@ -160,22 +161,6 @@ impl<K: Dynamics<N, M>, const N: usize, const M: usize> Dynamics<N, M> for Count
         self.hit(10);
         self.inner.dynamics_terms(x, xdot, g, gamma, mass, psi)
     }
-    #[allow(clippy::too_many_arguments)]
-    fn dynamics_derivatives(
-        &self,
-        x: &[f64; N],
-        xdot: &[f64; N],
-        xddot: &[f64; N],
-        lambda: &[f64; M],
-        dr_dx: &mut [[f64; N]; N],
-        dr_dxdot: &mut [[f64; N]; N],
-        dc_dx: &mut [[f64; M]; N],
-        dc_dxdot: &mut [[f64; M]; N],
-    ) {
-        self.hit(11);
-        self.inner
-            .dynamics_derivatives(x, xdot, xddot, lambda, dr_dx, dr_dxdot, dc_dx, dc_dxdot)
-    }
     // The generated solve is not a kernel (it evaluates nothing of the model): not counted.
     fn forward_dynamics_solve(
         &self,
@@ -202,6 +187,27 @@ impl<K: Dynamics<N, M>, const N: usize, const M: usize> Dynamics<N, M> for Count
     ) -> Option<rbss_runtime::SolveConditioning> {
         self.inner
             .inverse_dynamics_solve(g, mass, psi, xddot, q_forces, u, lambda)
+    }
+}
+
+impl<K: DynamicsDerivatives<N, M>, const N: usize, const M: usize> DynamicsDerivatives<N, M>
+    for Counting<K>
+{
+    #[allow(clippy::too_many_arguments)]
+    fn dynamics_derivatives(
+        &self,
+        x: &[f64; N],
+        xdot: &[f64; N],
+        xddot: &[f64; N],
+        lambda: &[f64; M],
+        dr_dx: &mut [[f64; N]; N],
+        dr_dxdot: &mut [[f64; N]; N],
+        dc_dx: &mut [[f64; M]; N],
+        dc_dxdot: &mut [[f64; M]; N],
+    ) {
+        self.hit(11);
+        self.inner
+            .dynamics_derivatives(x, xdot, xddot, lambda, dr_dx, dr_dxdot, dc_dx, dc_dxdot)
     }
 }
 

@@ -67,21 +67,6 @@ impl<K: Dynamics<N, M>, const N: usize, const M: usize> Dynamics<N, M> for NoSol
     fn energy(&self, x: &[f64; N], xdot: &[f64; N], out: &mut [f64; 2]) {
         self.0.energy(x, xdot, out)
     }
-    #[allow(clippy::too_many_arguments)]
-    fn dynamics_derivatives(
-        &self,
-        x: &[f64; N],
-        xdot: &[f64; N],
-        xddot: &[f64; N],
-        lambda: &[f64; M],
-        dr_dx: &mut [[f64; N]; N],
-        dr_dxdot: &mut [[f64; N]; N],
-        dc_dx: &mut [[f64; M]; N],
-        dc_dxdot: &mut [[f64; M]; N],
-    ) {
-        self.0
-            .dynamics_derivatives(x, xdot, xddot, lambda, dr_dx, dr_dxdot, dc_dx, dc_dxdot)
-    }
     fn dynamics_terms(
         &self,
         x: &[f64; N],
@@ -473,21 +458,6 @@ fn a_nan_in_the_mass_matrix_is_named() {
         ) {
             self.0.dynamics_terms(x, xdot, g, gamma, mass, psi);
             mass[20][20] = f64::NAN; // a platform coordinate: every solve reads it
-        }
-        #[allow(clippy::too_many_arguments)]
-        fn dynamics_derivatives(
-            &self,
-            x: &[f64; 24],
-            xdot: &[f64; 24],
-            xddot: &[f64; 24],
-            lambda: &[f64; 18],
-            dr_dx: &mut [[f64; 24]; 24],
-            dr_dxdot: &mut [[f64; 24]; 24],
-            dc_dx: &mut [[f64; 18]; 24],
-            dc_dxdot: &mut [[f64; 18]; 24],
-        ) {
-            self.0
-                .dynamics_derivatives(x, xdot, xddot, lambda, dr_dx, dr_dxdot, dc_dx, dc_dxdot)
         }
         #[allow(clippy::too_many_arguments)]
         fn inverse_dynamics_solve(

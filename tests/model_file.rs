@@ -153,9 +153,35 @@ fn fresh_cached_stale_and_corrupt_cache() {
     assert!(ok);
     assert!(listed.contains("left: 0 x, 1 y"), "{listed}");
 
+    // The subcommands so far ran in the plain library: the robot without its derivative
+    // kernel, behind the command alone (its only C symbols: the command's entry and the ABI
+    // version the loader checks).
+    let plain = entries(&cache).remove(0);
+    let robot_lib = std::fs::read_to_string(plain.join("robot-lib.rs")).unwrap();
+    assert!(robot_lib.contains("without_derivatives"), "{robot_lib}");
+    let library = plain.join(format!(
+        "{}robot{}",
+        std::env::consts::DLL_PREFIX,
+        std::env::consts::DLL_SUFFIX
+    ));
+    // SAFETY: a library the command built from these sources; only symbols are looked up.
+    let lib = unsafe { libloading::Library::new(&library) }.unwrap();
+    for (symbol, exported) in [
+        ("rbss_command", true),
+        ("rbss_abi_version", true),
+        ("rbss_forward_dynamics", false),
+        ("rbss_forward_dynamics_derivatives", false),
+    ] {
+        // SAFETY: looked up, never called.
+        let found = unsafe { lib.get::<unsafe extern "C" fn()>(symbol.as_bytes()) }.is_ok();
+        assert_eq!(found, exported, "{symbol} in {}", library.display());
+    }
+    drop(lib);
+
     // `rbss linearize --model-file` (issue 36): through the library, the JSON of the
     // compiled-in robot (A, B, the full derivatives), in both coordinates; a state off the
-    // constraints refused alike.
+    // constraints refused alike. Its first run builds the model's full library (with the
+    // derivative kernel and the C ABI): a second entry, which `id-derivatives` then uses too.
     let m = rbss_runtime::Model::new(five_bar::FiveBar::default());
     let mut d = rbss_runtime::Data::new(&m);
     rbss_runtime::inverse_velocity(&m, &mut d, &[0.2, -0.1]).unwrap();
@@ -183,7 +209,11 @@ fn fresh_cached_stale_and_corrupt_cache() {
         };
         let (ok, from_file, stderr) = run(["--model-file", model_arg]);
         assert!(ok, "{stderr}");
-        assert!(!stderr.contains("compiling"), "{stderr}");
+        assert_eq!(
+            stderr.contains("compiling robot `five_bar`"),
+            coordinates == "outputs",
+            "{stderr}"
+        );
         let (ok, builtin, stderr) = run(["--model", "five_bar"]);
         assert!(ok, "{stderr}");
         assert_eq!(from_file, builtin, "linearize --coordinates {coordinates}");
@@ -226,6 +256,8 @@ fn fresh_cached_stale_and_corrupt_cache() {
     };
     let (ok, from_file, stderr) = run(["--model-file", model_arg]);
     assert!(ok, "{stderr}");
+    assert!(!stderr.contains("compiling"), "{stderr}");
+    assert_eq!(entries(&cache).len(), 2, "the plain and the full library");
     let (ok, builtin, stderr) = run(["--model", "five_bar"]);
     assert!(ok, "{stderr}");
     assert_eq!(from_file, builtin, "id-derivatives");
@@ -254,7 +286,11 @@ fn fresh_cached_stale_and_corrupt_cache() {
     );
     assert!((want_new - want_old).abs() > 1e-3);
     let all = entries(&cache);
-    assert_eq!(all.len(), 2, "{all:?}");
+    assert_eq!(
+        all.len(),
+        3,
+        "the first model's two libraries, the edit's: {all:?}"
+    );
 
     // Corrupt: the current entry's library truncated, then its stamp naming another key:
     // each is rebuilt with a message, never a crash.
@@ -362,21 +398,26 @@ fn fresh_cached_stale_and_corrupt_cache() {
         locks_before
     );
 
-    // `rbss cache list`: both entries, the robot's name, the model file; prune to 1 byte
-    // removes the least recently used (the first model's) first, never a stamp-less build.
+    // `rbss cache list`: the three entries, the robot's name, the model file; pruning to the
+    // current entry's size removes the least recently used (the first model's two) first,
+    // never a stamp-less build.
     let (ok, listed, stderr) = rbss(&cache, &["cache", "list"], &[]);
     assert!(ok, "{stderr}");
-    assert_eq!(listed.matches(" five_bar ").count(), 2, "{listed}");
+    assert_eq!(listed.matches(" five_bar ").count(), 3, "{listed}");
     assert!(listed.contains(model_arg), "{listed}");
-    assert!(listed.contains("2 entries"), "{listed}");
-    let sizes: u64 = entries(&cache).iter().map(|e| dir_size(e)).sum();
+    assert!(listed.contains("3 entries"), "{listed}");
     let (ok, pruned, stderr) = rbss(
         &cache,
-        &["cache", "prune", "--max-size", &format!("{}", sizes - 1)],
+        &[
+            "cache",
+            "prune",
+            "--max-size",
+            &dir_size(&current).to_string(),
+        ],
         &[],
     );
     assert!(ok, "{stderr}");
-    assert!(pruned.contains("1 entries removed"), "{pruned}");
+    assert!(pruned.contains("2 entries removed"), "{pruned}");
     let left = entries(&cache);
     assert_eq!(left, vec![current.clone()], "{pruned}");
     // The remaining entry still serves, from the cache.

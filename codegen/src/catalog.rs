@@ -132,6 +132,9 @@ pub enum Trait {
     Kernels,
     /// `rbss_runtime::Dynamics`, of a full crate whose model has masses.
     Dynamics,
+    /// `rbss_runtime::DynamicsDerivatives`, of a full crate whose model has masses, unless it
+    /// was generated without the derivative kernel.
+    DynamicsDerivatives,
     /// `rbss_runtime::tasks::Robot`, of every scene.
     Robot,
     /// `rbss_runtime::tasks::Constraints`, of a scene with the kernel `constraints`.
@@ -145,7 +148,7 @@ pub enum Trait {
 }
 
 /// The traits of a full crate, in the order of their `impl`s.
-pub const FULL_TRAITS: [Trait; 2] = [Trait::Dynamics, Trait::Kernels];
+pub const FULL_TRAITS: [Trait; 3] = [Trait::Dynamics, Trait::DynamicsDerivatives, Trait::Kernels];
 
 /// The kernels' traits of a scene, in the order of their `impl`s (the tasks' traits follow, in
 /// [`Task::ALL`] order).
@@ -162,6 +165,7 @@ impl Trait {
         match self {
             Trait::Kernels => "Kernels",
             Trait::Dynamics => "Dynamics",
+            Trait::DynamicsDerivatives => "DynamicsDerivatives",
             Trait::Robot => "Robot",
             Trait::Constraints => "Constraints",
             Trait::Jacobian => "Jacobian",
@@ -175,6 +179,7 @@ impl Trait {
         match self {
             Trait::Kernels => "Kernels".to_string(),
             Trait::Dynamics => "rbss_runtime::Dynamics".to_string(),
+            Trait::DynamicsDerivatives => "rbss_runtime::DynamicsDerivatives".to_string(),
             t => format!("rbss_runtime::tasks::{}", t.name()),
         }
     }
@@ -182,7 +187,9 @@ impl Trait {
     /// The runtime file that defines the trait, relative to the workspace root.
     pub fn source(self) -> &'static str {
         match self {
-            Trait::Kernels | Trait::Dynamics => "runtime/src/kernels.rs",
+            Trait::Kernels | Trait::Dynamics | Trait::DynamicsDerivatives => {
+                "runtime/src/kernels.rs"
+            }
             _ => "runtime/src/tasks.rs",
         }
     }
@@ -248,7 +255,10 @@ pub struct Kernel {
 impl Kernel {
     /// Whether the kernel needs the model's masses (the dynamics' kernels and solves).
     pub fn needs_dynamics(&self) -> bool {
-        self.full == Some(Trait::Dynamics)
+        matches!(
+            self.full,
+            Some(Trait::Dynamics | Trait::DynamicsDerivatives)
+        )
     }
 }
 
@@ -420,7 +430,7 @@ pub static KERNELS: [Kernel; 18] = [
     ),
     evaluator(
         "dynamics_derivatives",
-        Some(Trait::Dynamics),
+        Some(Trait::DynamicsDerivatives),
         Some(Trait::Task(Task::Derivatives)),
         &[kernel_method(
             "dynamics_derivatives",
@@ -524,7 +534,7 @@ pub static KERNELS: [Kernel; 18] = [
 /// kinematic solves) first, as the runtime's trait declares them.
 pub fn impl_methods(t: Trait, emitted: &[&str]) -> Vec<&'static Method> {
     let of = |k: &Kernel| match t {
-        Trait::Kernels | Trait::Dynamics => k.full == Some(t),
+        Trait::Kernels | Trait::Dynamics | Trait::DynamicsDerivatives => k.full == Some(t),
         _ => k.scene == Some(t),
     };
     let mut kernels: Vec<&Kernel> = KERNELS

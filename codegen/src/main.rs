@@ -28,13 +28,14 @@ macro_rules! say {
 
 fn usage() -> ExitCode {
     say!(
-        "usage: rbss-codegen [--freeze] [--kinematics-only] [--check] [--out DIR] (--all | MODEL.toml...)\n\
+        "usage: rbss-codegen [--freeze] [--kinematics-only] [--no-derivatives] [--check] [--out DIR] (--all | MODEL.toml...)\n\
          \n       rbss-codegen --scene SCENE.toml --out DIR\n\
          \n       rbss-codegen import FILE.urdf|FILE.xml|FILE.sdf [--out MODEL.toml]\n\
          \n  --all      every models/*.toml (run from the workspace root)\
          \n  --check    regenerate in memory and fail if generated/NAME differs\
          \n  --freeze   fold parameter values into the kernels\
          \n  --kinematics-only   emit no dynamics kernels (M, psi, energies)\
+         \n  --no-derivatives    emit no derivative kernel (dynamics_derivatives)\
          \n  --out DIR  write the crate to DIR instead of generated/NAME (one model only)\
          \n  --scene SCENE.toml  generate only what the scene's tasks need (see scenes/README.md)"
     );
@@ -61,6 +62,7 @@ fn main() -> ExitCode {
             },
             "--freeze" => opts.freeze = true,
             "--kinematics-only" => opts.kinematics_only = true,
+            "--no-derivatives" => opts.no_derivatives = true,
             "--check" => check = true,
             "--all" => all = true,
             "--out" => match args.next() {

@@ -287,7 +287,7 @@ fn wrapper_methods(file: &syn::File, tr: &str, wrapper: &str) -> BTreeMap<String
 #[test]
 fn wrapping_robots_forward_every_method_they_do_not_hide() {
     // (file, wrapper, trait, the methods it hides on purpose)
-    let wrappers: [(&str, &str, &str, &[&str]); 6] = [
+    let wrappers: [(&str, &str, &str, &[&str]); 7] = [
         (
             "src/solver_table.rs",
             "Counting",
@@ -296,6 +296,12 @@ fn wrapping_robots_forward_every_method_they_do_not_hide() {
             &["closure_checks", "closure_check"],
         ),
         ("src/solver_table.rs", "Counting", "Dynamics", &[]),
+        (
+            "src/solver_table.rs",
+            "Counting",
+            "DynamicsDerivatives",
+            &[],
+        ),
         (
             "tests/generated_solves.rs",
             "NoSolve",
@@ -438,7 +444,7 @@ fn the_solver_tables_counters_name_catalogue_kernels() {
         assert!(!k.solve, "`{n}` is a solve, not a kernel");
     }
     let mut counted = 0;
-    for tr in ["Kernels", "Dynamics"] {
+    for tr in ["Kernels", "Dynamics", "DynamicsDerivatives"] {
         for (m, f) in wrapper_methods(&file, tr, "Counting") {
             let body = norm(&f.block);
             let Some(i) = body
@@ -458,4 +464,53 @@ fn the_solver_tables_counters_name_catalogue_kernels() {
         names.len(),
         "every entry of KERNELS is counted once"
     );
+}
+
+/// `rbss-codegen --no-derivatives` (the plain library of `rbss --model-file`): the full crate
+/// of a model without the derivative kernel and the `impl` of its trait, and nothing else
+/// missing: every other kernel and `impl` is the full crate's, character for character.
+#[test]
+fn a_crate_without_derivatives_lacks_the_derivative_kernel_only() {
+    let path = root().join("models/five_bar.toml");
+    let source = std::fs::read_to_string(&path).unwrap();
+    let module = |no_derivatives: bool| {
+        let opts = rbss_codegen::Options {
+            no_derivatives,
+            ..Default::default()
+        };
+        let g = rbss_codegen::generate("models/five_bar.toml", &source, &opts, &mut |_| {})
+            .unwrap_or_else(|e| panic!("{e}"));
+        let (_, text) = g
+            .files
+            .into_iter()
+            .find(|(p, _)| p.ends_with("src/five_bar.rs"))
+            .expect("the module");
+        syn::parse_file(&text).unwrap()
+    };
+    // Items by a name: functions by theirs, `impl`s by their trait's.
+    let items = |f: &syn::File| -> BTreeMap<String, String> {
+        f.items
+            .iter()
+            .filter_map(|i| match i {
+                syn::Item::Fn(f) => Some((format!("fn {}", f.sig.ident), norm(f))),
+                syn::Item::Impl(imp) => imp.trait_.as_ref().map(|(_, p, _)| {
+                    let name = p.segments.last().unwrap().ident.to_string();
+                    (format!("impl {name}"), norm(imp))
+                }),
+                _ => None,
+            })
+            .collect()
+    };
+    let (full, lean) = (items(&module(false)), items(&module(true)));
+    let gone: Vec<&String> = full.keys().filter(|k| !lean.contains_key(*k)).collect();
+    assert_eq!(
+        gone,
+        ["fn dynamics_derivatives", "impl DynamicsDerivatives"],
+        "what --no-derivatives leaves out"
+    );
+    assert!(lean.keys().all(|k| full.contains_key(k)));
+    for (k, v) in &lean {
+        assert_eq!(v, &full[k], "`{k}` differs without the derivatives");
+    }
+    assert!(lean.contains_key("impl Dynamics") && lean.contains_key("fn dynamics_terms"));
 }

@@ -9,8 +9,8 @@
 //! convention), every output only on success: the pointers are checked before anything runs.
 
 use rbss_runtime::{
-    Coordinates, ForwardDynamicsDerivatives, InverseDynamicsDerivatives, Linearization,
-    SolverError, StepDerivatives,
+    Coordinates, DynamicsDerivatives, ForwardDynamicsDerivatives, InverseDynamicsDerivatives,
+    Linearization, SolverError, StepDerivatives,
 };
 
 use super::dynamics::STATE_TOL;
@@ -120,7 +120,11 @@ unsafe fn read_state<K, const N: usize, const M: usize>(
 /// # Safety
 /// See [`kinematics`]; every array holds the length of `rbss.h`.
 #[allow(clippy::too_many_arguments)]
-pub unsafe fn forward_dynamics_derivatives<K: Dynamics<N, M>, const N: usize, const M: usize>(
+pub unsafe fn forward_dynamics_derivatives<
+    K: DynamicsDerivatives<N, M>,
+    const N: usize,
+    const M: usize,
+>(
     h: *mut Handle<K, N, M>,
     x: *const f64,
     xdot: *const f64,
@@ -178,7 +182,11 @@ pub unsafe fn forward_dynamics_derivatives<K: Dynamics<N, M>, const N: usize, co
 /// # Safety
 /// See [`kinematics`]; every array holds the length of `rbss.h`.
 #[allow(clippy::too_many_arguments)]
-pub unsafe fn inverse_dynamics_derivatives<K: Dynamics<N, M>, const N: usize, const M: usize>(
+pub unsafe fn inverse_dynamics_derivatives<
+    K: DynamicsDerivatives<N, M>,
+    const N: usize,
+    const M: usize,
+>(
     h: *mut Handle<K, N, M>,
     x: *const f64,
     xdot: *const f64,
@@ -248,7 +256,7 @@ pub unsafe fn inverse_dynamics_derivatives<K: Dynamics<N, M>, const N: usize, co
 /// # Safety
 /// See [`kinematics`]; every array holds the length of `rbss.h`.
 #[allow(clippy::too_many_arguments)]
-pub unsafe fn linearize<K: Dynamics<N, M>, const N: usize, const M: usize>(
+pub unsafe fn linearize<K: DynamicsDerivatives<N, M>, const N: usize, const M: usize>(
     h: *mut Handle<K, N, M>,
     coordinates: c_int,
     x: *const f64,
@@ -325,7 +333,7 @@ pub unsafe fn linearize<K: Dynamics<N, M>, const N: usize, const M: usize>(
 /// # Safety
 /// See [`kinematics`]; every array holds the length of `rbss.h`.
 #[allow(clippy::too_many_arguments)]
-pub unsafe fn step_derivatives<K: Dynamics<N, M>, const N: usize, const M: usize>(
+pub unsafe fn step_derivatives<K: DynamicsDerivatives<N, M>, const N: usize, const M: usize>(
     h: *mut Handle<K, N, M>,
     method: c_int,
     x: *const f64,

@@ -3,7 +3,8 @@
 
 /// The `extern "C"` functions of `include/rbss.h` for one robot type, in a `cdylib` crate:
 /// `rbss_ffi::export!(stewart_6ups::Stewart6Ups, dynamics);` (or `kinematics` for a robot
-/// generated without dynamics, whose dynamics functions return `RBSS_ERR_NO_DYNAMICS`). The
+/// generated without dynamics, whose dynamics functions return `RBSS_ERR_NO_DYNAMICS`; or
+/// `version` for `rbss_abi_version` alone). The
 /// crate `$krate` is the generated crate (its `N` and `M` are the sizes).
 ///
 /// One function per entry of the table (`ffi/abi`, [`rbss_abi::functions!`]), calling the
@@ -17,6 +18,14 @@ macro_rules! export {
     ($krate:ident :: $ty:ident, kinematics) => {
         $crate::export!(@items $krate :: $ty, false);
         $crate::abi::functions!([$crate::export] @functions kinematics);
+    };
+    // Only `rbss_abi_version` (the library `rbss --model-file` builds for the subcommands that
+    // take no derivatives: the command's entry, `rbss::export_command!`, is all it offers).
+    ($krate:ident :: $ty:ident, version) => {
+        #[unsafe(no_mangle)]
+        pub extern "C" fn rbss_abi_version() -> u32 {
+            $crate::abi_version()
+        }
     };
     (@items $krate:ident :: $ty:ident, $dynamics:expr) => {
         /// The robot's handle type.

@@ -15,9 +15,9 @@
 
 use divan::{Bencher, black_box};
 use rbss_runtime::{
-    Baumgarte, Coordinates, Data, DerivativesSolver, Dynamics, ForwardDynamicsDerivatives,
-    Linearization, Model, forward_dynamics, forward_dynamics_derivatives,
-    forward_dynamics_derivatives_with, linearize,
+    Baumgarte, Coordinates, Data, DerivativesSolver, DynamicsDerivatives,
+    ForwardDynamicsDerivatives, Linearization, Model, forward_dynamics,
+    forward_dynamics_derivatives, forward_dynamics_derivatives_with, linearize,
 };
 use stewart_6ups::{M, N, Stewart6Ups};
 
@@ -60,7 +60,7 @@ fn dynamics_derivatives_6ups(b: Bencher) {
     let (mut rx, mut rv) = ([[0.0; N]; N], [[0.0; N]; N]);
     let (mut cx, mut cv) = ([[0.0; M]; N], [[0.0; M]; N]);
     b.bench_local(|| {
-        Dynamics::dynamics_derivatives(
+        DynamicsDerivatives::dynamics_derivatives(
             black_box(k),
             black_box(&d.x),
             black_box(&d.xdot),

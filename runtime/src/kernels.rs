@@ -267,23 +267,6 @@ pub trait Dynamics<const N: usize, const M: usize>: Kernels<N, M> {
         self.mass_matrix(x, mass);
         self.psi(x, xdot, psi);
     }
-    /// First derivatives of the equations of motion at one state, given `xddot` and `lambda`:
-    /// `dr_dx = ∂r/∂X`, `dr_dxdot = ∂r/∂Xdot` (N × N) of the inverse-dynamics residual
-    /// `r = M(X) Ẍ - psi(X, Ẋ) + G(X)ᵀ lambda`, and `dc_dx = ∂c/∂X`, `dc_dxdot = ∂c/∂Xdot`
-    /// (M × N) of the acceleration constraint `c = G(X) Ẍ - gamma(X, Ẋ)`; column-major. Writes
-    /// only the structural non-zeros (a buffer that starts at zero stays correct).
-    #[allow(clippy::too_many_arguments)]
-    fn dynamics_derivatives(
-        &self,
-        x: &[f64; N],
-        xdot: &[f64; N],
-        xddot: &[f64; N],
-        lambda: &[f64; M],
-        dr_dx: &mut [[f64; N]; N],
-        dr_dxdot: &mut [[f64; N]; N],
-        dc_dx: &mut [[f64; M]; N],
-        dc_dxdot: &mut [[f64; M]; N],
-    );
     /// Forward dynamics' saddle-point system `M Ẍ + Gᵀ lambda = force`, `G Ẍ = gamma`, solved
     /// by the code the generator emitted for this robot (the elimination onto the outputs,
     /// straight-line over the structural non-zeros of `G` and `M`), from the outputs of
@@ -325,6 +308,30 @@ pub trait Dynamics<const N: usize, const M: usize>: Kernels<N, M> {
         let _ = (g, mass, psi, xddot, q_forces, u, lambda);
         None
     }
+}
+
+/// The derivative kernel of a robot's equations of motion: generated beside [`Dynamics`]
+/// unless the robot was generated without it (`rbss-codegen --no-derivatives`, the library
+/// `rbss --model-file` builds for the subcommands that take no derivatives). The solvers of
+/// the `derivatives` task ([`crate::tasks::Derivatives`]) need it.
+pub trait DynamicsDerivatives<const N: usize, const M: usize>: Dynamics<N, M> {
+    /// First derivatives of the equations of motion at one state, given `xddot` and `lambda`:
+    /// `dr_dx = ∂r/∂X`, `dr_dxdot = ∂r/∂Xdot` (N × N) of the inverse-dynamics residual
+    /// `r = M(X) Ẍ - psi(X, Ẋ) + G(X)ᵀ lambda`, and `dc_dx = ∂c/∂X`, `dc_dxdot = ∂c/∂Xdot`
+    /// (M × N) of the acceleration constraint `c = G(X) Ẍ - gamma(X, Ẋ)`; column-major. Writes
+    /// only the structural non-zeros (a buffer that starts at zero stays correct).
+    #[allow(clippy::too_many_arguments)]
+    fn dynamics_derivatives(
+        &self,
+        x: &[f64; N],
+        xdot: &[f64; N],
+        xddot: &[f64; N],
+        lambda: &[f64; M],
+        dr_dx: &mut [[f64; N]; N],
+        dr_dxdot: &mut [[f64; N]; N],
+        dc_dx: &mut [[f64; M]; N],
+        dc_dxdot: &mut [[f64; M]; N],
+    );
 }
 
 /// What a generated solve read off its factors (see [`Dynamics::forward_dynamics_solve`]).

@@ -103,6 +103,7 @@ pub use integrate::{
     IntegrateError, IntegrateOptions, IntegrateStats, Method, Simulator, Stabilization, StepControl,
 };
 pub use kernels::{
-    Dynamics, IK_BLOCK_ORDER_UNDECLARED, IkBlock, Kernels, SolveConditioning, Structure, gear_ratio,
+    Dynamics, DynamicsDerivatives, IK_BLOCK_ORDER_UNDECLARED, IkBlock, Kernels, SolveConditioning,
+    Structure, gear_ratio,
 };
 pub use model::{Model, SolverOptions};

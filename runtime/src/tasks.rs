@@ -1,6 +1,7 @@
 //! What a robot can do: one trait per kernel the solvers call, and one per task of a scene.
 //!
-//! A full generated robot implements [`Kernels`] (and [`Dynamics`] when its model has masses);
+//! A full generated robot implements [`Kernels`] (and [`Dynamics`] and [`DynamicsDerivatives`]
+//! when its model has masses; the last not when generated with `rbss-codegen --no-derivatives`);
 //! the blanket impls below give it every trait of this module, so it offers every solver. A
 //! *scene* crate (`rbss-codegen --scene FILE`) generates only the kernels its tasks need and
 //! implements only the traits of those kernels and tasks. The solvers are bounded by the task
@@ -58,7 +59,9 @@
 //! let _ = rbss_runtime::forward_dynamics(&model, &mut data, &[0.0], None, Baumgarte::NONE);
 //! ```
 
-use crate::kernels::{Dynamics, IK_BLOCK_ORDER_UNDECLARED, Kernels, SolveConditioning, Structure};
+use crate::kernels::{
+    Dynamics, DynamicsDerivatives, IK_BLOCK_ORDER_UNDECLARED, Kernels, SolveConditioning, Structure,
+};
 
 // ---- kernels shared by several tasks ----
 
@@ -292,7 +295,7 @@ pub trait Energy<const N: usize, const M: usize>: Robot<N, M> {
 #[diagnostic::on_unimplemented(
     message = "the trait bound `{Self}: rbss_runtime::tasks::Derivatives<{N}, {M}>` is not satisfied: `{Self}` was generated without the `derivatives` task",
     label = "needs the task `derivatives`",
-    note = "add \"derivatives\" to the `tasks` of its scene file and regenerate"
+    note = "add \"derivatives\" to the `tasks` of its scene file and regenerate (a full crate: generate it without `--no-derivatives`)"
 )]
 pub trait Derivatives<const N: usize, const M: usize>: ForwardDynamics<N, M> {
     /// The derivatives of the equations of motion (see [`Dynamics::dynamics_derivatives`]).
@@ -443,7 +446,7 @@ impl<T: Dynamics<N, M>, const N: usize, const M: usize> Energy<N, M> for T {
     }
 }
 
-impl<T: Dynamics<N, M>, const N: usize, const M: usize> Derivatives<N, M> for T {
+impl<T: DynamicsDerivatives<N, M>, const N: usize, const M: usize> Derivatives<N, M> for T {
     fn dynamics_derivatives(
         &self,
         x: &[f64; N],
@@ -455,7 +458,7 @@ impl<T: Dynamics<N, M>, const N: usize, const M: usize> Derivatives<N, M> for T 
         dc_dx: &mut [[f64; M]; N],
         dc_dxdot: &mut [[f64; M]; N],
     ) {
-        Dynamics::dynamics_derivatives(
+        DynamicsDerivatives::dynamics_derivatives(
             self, x, xdot, xddot, lambda, dr_dx, dr_dxdot, dc_dx, dc_dxdot,
         )
     }

@@ -90,23 +90,6 @@ impl Dynamics<N, M> for Synthetic {
     fn energy(&self, _x: &[f64; N], _xdot: &[f64; N], out: &mut [f64; 2]) {
         *out = [0.0; 2];
     }
-    /// The kernels are constant in `X` and `Ẋ`: every derivative is exactly zero.
-    fn dynamics_derivatives(
-        &self,
-        _x: &[f64; N],
-        _xdot: &[f64; N],
-        _xddot: &[f64; N],
-        _lambda: &[f64; M],
-        dr_dx: &mut [[f64; N]; N],
-        dr_dxdot: &mut [[f64; N]; N],
-        dc_dx: &mut [[f64; M]; N],
-        dc_dxdot: &mut [[f64; M]; N],
-    ) {
-        *dr_dx = [[0.0; N]; N];
-        *dr_dxdot = [[0.0; N]; N];
-        *dc_dx = [[0.0; M]; N];
-        *dc_dxdot = [[0.0; M]; N];
-    }
 }
 
 /// A random orthogonal `k × k` matrix (Gram–Schmidt of a random one), rows.

@@ -1,5 +1,5 @@
-//! The trait `impl`s of a generated crate, from the catalogue: `Dynamics` and `Kernels` for a
-//! full crate; for a scene, the traits of `rbss_runtime::tasks` of its kernels and of its tasks
+//! The trait `impl`s of a generated crate, from the catalogue: `Dynamics`, `DynamicsDerivatives`
+//! (when the derivative kernel is emitted) and `Kernels` for a full crate; for a scene, the traits of `rbss_runtime::tasks` of its kernels and of its tasks
 //! (with those they imply), and nothing else, so a solver of another task does not compile with
 //! it. Each method is the catalogue's ([`catalog::Method`]), written once for both.
 
@@ -25,7 +25,11 @@ pub(crate) fn impls(r: &Robot<'_>, sel: Option<&Selection<'_>>) -> TokenStream {
     let traits: Vec<Trait> = match sel {
         None => catalog::FULL_TRAITS
             .into_iter()
-            .filter(|&t| t != Trait::Dynamics || r.d.dynamics.is_some())
+            .filter(|&t| match t {
+                Trait::Dynamics => r.d.dynamics.is_some(),
+                Trait::DynamicsDerivatives => r.emitted.contains(&"dynamics_derivatives"),
+                _ => true,
+            })
             .collect(),
         Some(s) => {
             let mut traits: Vec<Trait> = catalog::SCENE_TRAITS

@@ -23,17 +23,19 @@ pub(crate) struct Emitted {
     pub names: Vec<&'static str>,
 }
 
-/// Emits the kernels of the crate (a scene's: only those its tasks call), collecting the
-/// constants they read into `consts`.
+/// Emits the kernels of the crate (a scene's: only those its tasks call; a full crate's without
+/// `dynamics_derivatives` when `derivatives` is false), collecting the constants they read
+/// into `consts`.
 pub(crate) fn emit(
     model: &Model,
     d: &mut Derivation,
     sel: Option<&Selection<'_>>,
+    derivatives: bool,
     consts: &mut Consts,
     progress: &mut dyn FnMut(&str),
 ) -> Emitted {
     // The derivatives of the equations of motion join the graph only where they are emitted.
-    let derivs = if sel.is_none_or(|s| s.kernels.contains(&"dynamics_derivatives")) {
+    let derivs = if derivatives && sel.is_none_or(|s| s.kernels.contains(&"dynamics_derivatives")) {
         let t = Instant::now();
         let dd = crate::derive::dynamics_derivatives(d);
         if dd.is_some() {

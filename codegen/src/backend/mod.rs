@@ -38,6 +38,10 @@ pub struct Options {
     /// Emit only the kinematics kernels (no `M`, `psi`, energies), for scenes that need no
     /// dynamics. Models without masses are always kinematics-only.
     pub kinematics_only: bool,
+    /// Leave out the derivative kernel `dynamics_derivatives` (and the robot's
+    /// `DynamicsDerivatives` impl): the library `rbss --model-file` builds for the subcommands
+    /// that take no derivatives compiles in a third of the time for a legged robot.
+    pub no_derivatives: bool,
 }
 
 /// Per-kernel figures.
@@ -72,7 +76,8 @@ pub(crate) fn module_tokens(
     let robot = format_ident!("{}", camel(&model.name));
     let params = params::Params::new(model, opts, sel, model_path);
     let mut consts = Consts::default();
-    let mut emitted = kernels::emit(model, d, sel, &mut consts, progress);
+    let derivatives = sel.is_some() || !opts.no_derivatives;
+    let mut emitted = kernels::emit(model, d, sel, derivatives, &mut consts, progress);
     let d = &*d;
     solves::emit(model, d, home, sel, &mut emitted, progress);
     let params = params.tokens(model, d, &consts);

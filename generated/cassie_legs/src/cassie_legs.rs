@@ -41992,6 +41992,20 @@ impl rbss_runtime::Dynamics<N, M> for CassieLegs {
     ) {
         dynamics_terms(&self.c, x, xdot, g, gamma, mass, psi)
     }
+    fn forward_dynamics_solve(
+        &self,
+        g: &[[f64; M]; N],
+        mass: &[[f64; N]; N],
+        force: &[f64; N],
+        gamma: &[f64; M],
+        xddot: &mut [f64; N],
+        lambda: &mut [f64; M],
+    ) -> Option<rbss_runtime::SolveConditioning> {
+        forward_dynamics_solve(g, mass, force, gamma, xddot, lambda)
+    }
+}
+
+impl rbss_runtime::DynamicsDerivatives<N, M> for CassieLegs {
     fn dynamics_derivatives(
         &self,
         x: &[f64; N],
@@ -42014,17 +42028,6 @@ impl rbss_runtime::Dynamics<N, M> for CassieLegs {
             dc_dx,
             dc_dxdot,
         )
-    }
-    fn forward_dynamics_solve(
-        &self,
-        g: &[[f64; M]; N],
-        mass: &[[f64; N]; N],
-        force: &[f64; N],
-        gamma: &[f64; M],
-        xddot: &mut [f64; N],
-        lambda: &mut [f64; M],
-    ) -> Option<rbss_runtime::SolveConditioning> {
-        forward_dynamics_solve(g, mass, force, gamma, xddot, lambda)
     }
 }
 

@@ -12666,29 +12666,6 @@ impl rbss_runtime::Dynamics<N, M> for HybridTricept {
     ) {
         dynamics_terms(&self.c, x, xdot, g, gamma, mass, psi)
     }
-    fn dynamics_derivatives(
-        &self,
-        x: &[f64; N],
-        xdot: &[f64; N],
-        xddot: &[f64; N],
-        lambda: &[f64; M],
-        dr_dx: &mut [[f64; N]; N],
-        dr_dxdot: &mut [[f64; N]; N],
-        dc_dx: &mut [[f64; M]; N],
-        dc_dxdot: &mut [[f64; M]; N],
-    ) {
-        dynamics_derivatives(
-            &self.c,
-            x,
-            xdot,
-            xddot,
-            lambda,
-            dr_dx,
-            dr_dxdot,
-            dc_dx,
-            dc_dxdot,
-        )
-    }
     fn forward_dynamics_solve(
         &self,
         g: &[[f64; M]; N],
@@ -12711,6 +12688,32 @@ impl rbss_runtime::Dynamics<N, M> for HybridTricept {
         lambda: &mut [f64; M],
     ) -> Option<rbss_runtime::SolveConditioning> {
         inverse_dynamics_solve(g, mass, psi, xddot, q_forces, u, lambda)
+    }
+}
+
+impl rbss_runtime::DynamicsDerivatives<N, M> for HybridTricept {
+    fn dynamics_derivatives(
+        &self,
+        x: &[f64; N],
+        xdot: &[f64; N],
+        xddot: &[f64; N],
+        lambda: &[f64; M],
+        dr_dx: &mut [[f64; N]; N],
+        dr_dxdot: &mut [[f64; N]; N],
+        dc_dx: &mut [[f64; M]; N],
+        dc_dxdot: &mut [[f64; M]; N],
+    ) {
+        dynamics_derivatives(
+            &self.c,
+            x,
+            xdot,
+            xddot,
+            lambda,
+            dr_dx,
+            dr_dxdot,
+            dc_dx,
+            dc_dxdot,
+        )
     }
 }
 
