@@ -259,7 +259,7 @@ pub(super) fn import<'a, 'i>(
                     .filter(|a| {
                         k.attribute(*a).is_some_and(|v| {
                             v.split_ascii_whitespace()
-                                .any(|x| x.parse::<f64>().map_or(true, |x| x != 0.0))
+                                .any(|x| x.parse::<f64>() != Ok(0.0))
                         })
                     })
                     .collect::<Vec<_>>();
