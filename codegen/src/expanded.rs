@@ -252,14 +252,20 @@ pub fn derive(model: &Model, with_dynamics: bool) -> Derivation {
     let frames = body_frames(model);
     let mut f = Vec::new();
     for lp in &model.loops {
-        if let LoopKind::Coupling {
-            a,
-            b,
-            ratio,
-            offset,
-        } = &lp.kind
-        {
-            let row = Atom::var(q(*a)) - to_atom(ratio) * Atom::var(q(*b)) - to_atom(offset);
+        if let LoopKind::Coupling { a, b, poly } = &lp.kind {
+            // a - Σ_k c_k b^k, the powers written out.
+            let mut row = to_atom(a);
+            let xb = b.as_ref().map(to_atom);
+            let mut power = Atom::num(1);
+            for (k, c) in poly.iter().enumerate() {
+                let term = &to_atom(c) * &power;
+                row = &row - &term;
+                if let Some(xb) = &xb
+                    && k + 1 < poly.len()
+                {
+                    power = &power * xb;
+                }
+            }
             f.push(simplify(&row));
             continue;
         }

@@ -213,7 +213,7 @@ pub struct Attachment {
 }
 
 /// A loop closure (`[[loop]]`): equations between two attachments `a` and `b` (or, for a
-/// coupling, between two coordinates), by [`LoopKind`].
+/// coupling, between two expressions of the coordinates), by [`LoopKind`].
 #[derive(Debug, Clone)]
 pub struct Loop {
     pub name: String,
@@ -255,12 +255,14 @@ pub enum LoopKind {
     /// `distance`: `|origin(a) - origin(b)| = length` (one equation,
     /// `(|d|² - length²) / (2 length)`).
     Distance(Expr),
-    /// `coupling`: `X[a] = ratio * X[b] + offset` (one equation, `X[a] - ratio X[b] - offset`).
+    /// `coupling`: `a = poly[0] + poly[1] b + poly[2] b² + …` between two expressions of the
+    /// coordinates (a coordinate, a fixed tendon's length `2 q1 + 0.5 q3`), one equation
+    /// `a - p(b)`; `ratio` and `offset` are `poly = [offset, ratio]`. Without `b`, `a = poly[0]`
+    /// (`poly` has one entry).
     Coupling {
-        a: usize,
-        b: usize,
-        ratio: Expr,
-        offset: Expr,
+        a: Expr,
+        b: Option<Expr>,
+        poly: Vec<Expr>,
     },
     /// `unit_norm`: a `free` joint's quaternion `q = X[i0..i3]` has unit norm (one equation,
     /// `(qᵀq - 1) / 2`, whose gradient is `qᵀ`). The parser adds one per `free` joint.

@@ -1,7 +1,8 @@
 //! The named-intermediate derivation (`rbss_codegen::derive`, what the kernels are generated
 //! from) against the fully expanded one done independently with symbolica
 //! (`rbss_codegen::expanded`): `f`, `G`, `gamma`, `M` and `psi` of the five-bar, the paper's
-//! 6-UPS, the UR5, a 4-link chain and the spring pendulum (the joints' forces) at random states. The two share only the parsed model: one builds frames recursively
+//! 6-UPS, the UR5, a 4-link chain, the spring pendulum (the joints' forces), every loop kind and
+//! polynomial couplings at random states. The two share only the parsed model: one builds frames recursively
 //! and takes the dynamics body by body (Newton-Euler projected on the Jacobians), the other
 //! expands the frames and differentiates `T` as Lagrange's equations are written.
 //!
@@ -328,4 +329,13 @@ fn graph_derivation_matches_the_expanded_one() {
         let source = std::fs::read_to_string(root.join(path)).unwrap();
         compare(path, &source, Form::Recursive);
     }
+    // Polynomial couplings between expressions of the coordinates (a joint's, a fixed tendon's
+    // length), one coefficient a parameter, and a coordinate held at a constant.
+    let path = "codegen/tests/import/couplings.toml";
+    let source = std::fs::read_to_string(root.join(path)).unwrap();
+    let poly = "poly = [0.1, 0.5, 0.3, 0.2, 0.1]";
+    assert!(source.contains(poly), "{path}: {poly}");
+    let source = source.replace(poly, "poly = [0.1, 0.5, \"c2\", 0.2, 0.1]")
+        + "\n[parameters]\nc2 = { value = 0.3, unit = \"1\" }\n";
+    compare(path, &source, Form::Recursive);
 }

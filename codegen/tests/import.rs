@@ -337,6 +337,29 @@ fn urdf_planar_joints_are_three_coordinates() {
     )
     .unwrap();
     let imported = model_at(&d.join("cart.toml"));
+    // The coupled tendons are not skipped; a coupled tendon's stiffness is, with a warning.
+    use rbss_codegen::import::{Format, import_file};
+    let xml = here().join("couplings.xml");
+    let (_, warnings) = import_file(&xml, "couplings.xml", Format::Mjcf)
+        .unwrap_or_else(|e| panic!("{}", e.render()));
+    assert!(warnings.items.is_empty(), "{}", warnings.render_warnings());
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(&xml).unwrap();
+    let stiff = text.replace(
+        "<fixed name=\"t2\">",
+        "<fixed name=\"t2\" stiffness=\"10\">",
+    );
+    assert_ne!(stiff, text);
+    std::fs::write(dir.path().join("stiff.xml"), stiff).unwrap();
+    let (_, warnings) = import_file(&dir.path().join("stiff.xml"), "stiff.xml", Format::Mjcf)
+        .unwrap_or_else(|e| panic!("{}", e.render()));
+    let report = warnings.render_warnings();
+    assert_eq!(warnings.items.len(), 1, "{report}");
+    assert!(
+        report.contains("tendon `t2`'s stiffness is not applied"),
+        "{report}"
+    );
+
     let names: Vec<&str> = imported
         .coordinates
         .iter()
@@ -1016,4 +1039,184 @@ fn sdf_prismatic_joint_closing_a_loop_is_a_coordinate() {
             "home {home:?}, by hand [{th}, {k}, {slide}]"
         );
     }
+}
+
+/// MuJoCo 4.0.0's equality rows for couplings.xml at two `qpos` (`efc_pos`, then the rows of
+/// `efc_J`, equalities bend, pull, lock), measured with bench/peers' venv:
+/// `m = mujoco.MjModel.from_xml_path("codegen/tests/import/couplings.xml"); d.qpos[:] = X;
+/// mujoco.mj_forward(m, d)`, printed with `repr`.
+#[allow(clippy::type_complexity)]
+const MUJOCO_EQUALITIES: [([f64; 5], [f64; 3], [[f64; 5]; 3]); 2] = [
+    (
+        [0.7, -0.4, 0.25, 0.5, -0.3],
+        [
+            -0.5633600000000001,
+            0.12460937499999991,
+            -0.6000000000000001,
+        ],
+        [
+            [-0.8615999999999999, 1.0, 0.0, 0.0, 0.0],
+            [2.0, 0.0, -0.5, -1.5281250000000002, 0.0],
+            [0.0, 0.0, 0.0, 0.0, 1.0],
+        ],
+    ),
+    (
+        [-0.2, 0.9, -0.1, -0.8, 0.6],
+        [1.19375, -1.1593600000000002, 0.3],
+        [
+            [-0.30000000000000004, 1.0, 0.0, 0.0, 0.0],
+            [2.0, 0.0, -0.5, 1.5168000000000008, 0.0],
+            [0.0, 0.0, 0.0, 0.0, 1.0],
+        ],
+    ),
+];
+
+/// MuJoCo's polynomial equalities (couplings.xml): a joint equality of degree 4 between hinges
+/// with `ref`, a fixed-tendon equality of degree 4, a joint held at a constant (no `joint2`).
+/// The imported robot derives the kernels of couplings.toml, written by hand; its `f` and `G`
+/// are MuJoCo's `efc_pos` and `efc_J` rows; `f` vanishes on a motion that satisfies the
+/// polynomials; `G` agrees with central differences of `f` and `gamma` with second differences
+/// along motions (on the couplings, `G Ẍ = gamma`; off them, `gamma = G Ẍ - f̈`).
+#[test]
+fn mjcf_polynomial_and_tendon_equalities_are_couplings() {
+    let plain = model_at(&here().join("couplings.toml"));
+    let imported = model_at(&here().join("couplings_mjcf.toml"));
+    let worst = worst_difference(&plain, &imported);
+    println!("couplings from MJCF vs couplings.toml: worst relative difference {worst:e}");
+    assert!(worst < 1e-12, "worst {worst:e}");
+
+    // The coupled tendons are not skipped; a coupled tendon's stiffness is, with a warning.
+    use rbss_codegen::import::{Format, import_file};
+    let xml = here().join("couplings.xml");
+    let (_, warnings) = import_file(&xml, "couplings.xml", Format::Mjcf)
+        .unwrap_or_else(|e| panic!("{}", e.render()));
+    assert!(warnings.items.is_empty(), "{}", warnings.render_warnings());
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(&xml).unwrap();
+    let stiff = text.replace(
+        "<fixed name=\"t2\">",
+        "<fixed name=\"t2\" stiffness=\"10\">",
+    );
+    assert_ne!(stiff, text);
+    std::fs::write(dir.path().join("stiff.xml"), stiff).unwrap();
+    let (_, warnings) = import_file(&dir.path().join("stiff.xml"), "stiff.xml", Format::Mjcf)
+        .unwrap_or_else(|e| panic!("{}", e.render()));
+    let report = warnings.render_warnings();
+    assert_eq!(warnings.items.len(), 1, "{report}");
+    assert!(
+        report.contains("tendon `t2`'s stiffness is not applied"),
+        "{report}"
+    );
+
+    let names: Vec<&str> = imported
+        .coordinates
+        .iter()
+        .map(|c| c.name.as_str())
+        .collect();
+    assert_eq!(names, ["j1", "j2", "s3", "j4", "j5"], "MuJoCo's qpos order");
+    let d = derived(&imported);
+    assert_eq!(d.m, 3);
+    let p: Vec<f64> = imported.parameters.iter().map(|q| q.value).collect();
+    let f = |x: &[f64]| -> Vec<f64> {
+        d.f.iter()
+            .map(|&i| d.graph.eval(i, x, &[0.0; 5], &p))
+            .collect()
+    };
+    let g = |x: &[f64]| -> Vec<Vec<f64>> {
+        d.g.iter()
+            .map(|row| {
+                row.iter()
+                    .map(|&i| d.graph.eval(i, x, &[0.0; 5], &p))
+                    .collect()
+            })
+            .collect()
+    };
+    let gamma = |x: &[f64], v: &[f64]| -> Vec<f64> {
+        d.gamma.iter().map(|&i| d.graph.eval(i, x, v, &p)).collect()
+    };
+    let mut worst_mj = 0.0f64;
+    for (x, pos, jac) in &MUJOCO_EQUALITIES {
+        let (fx, gx) = (f(x), g(x));
+        for r in 0..3 {
+            worst_mj = worst_mj.max((fx[r] - pos[r]).abs());
+            for c in 0..5 {
+                worst_mj = worst_mj.max((gx[r][c] - jac[r][c]).abs());
+            }
+        }
+    }
+    println!("f, G against MuJoCo's efc_pos, efc_J: worst difference {worst_mj:e}");
+    assert!(worst_mj < 1e-14, "against MuJoCo: {worst_mj:e}");
+
+    // A motion on the couplings: j1 and j4 free, j2, s3 and j5 from the polynomials.
+    let p1 = |u: f64| 0.1 + 0.5 * u + 0.3 * u * u + 0.2 * u.powi(3) + 0.1 * u.powi(4);
+    let p2 = |w: f64| 0.05 + 0.4 * w + 0.3 * w * w + 0.1 * w.powi(4);
+    let on = |t: f64| -> [f64; 5] {
+        let j1 = 0.3 + 0.4 * t.sin();
+        let j4 = 0.6 * (1.3 * t).cos();
+        let j2 = -0.2 + p1(j1 - 0.3);
+        let s3 = (2.0 * j1 - 0.6 - p2(1.5 * j4)) / 0.5;
+        [j1, j2, s3, j4, 0.3]
+    };
+    let h = 1e-4;
+    let (mut worst_f, mut worst_on) = (0.0f64, 0.0f64);
+    for k in 0..8 {
+        let t = 0.7 * k as f64 - 2.0;
+        let (x0, xp, xm) = (on(t), on(t + h), on(t - h));
+        worst_f = worst_f.max(f(&x0).iter().fold(0.0, |a, b| a.max(b.abs())));
+        let v: Vec<f64> = (0..5).map(|i| (xp[i] - xm[i]) / (2.0 * h)).collect();
+        let a: Vec<f64> = (0..5)
+            .map(|i| (xp[i] - 2.0 * x0[i] + xm[i]) / (h * h))
+            .collect();
+        let (gx, gam) = (g(&x0), gamma(&x0, &v));
+        for r in 0..3 {
+            let ga: f64 = (0..5).map(|c| gx[r][c] * a[c]).sum();
+            worst_on = worst_on.max((ga - gam[r]).abs() / (1.0 + gam[r].abs()));
+        }
+    }
+    println!("on the couplings: max |f| {worst_f:e}, |G Xddot - gamma| {worst_on:e}");
+    assert!(worst_f < 1e-14, "f on the couplings: {worst_f:e}");
+    assert!(
+        worst_on < 1e-6,
+        "G Xddot - gamma on the couplings: {worst_on:e}"
+    );
+
+    // Off the couplings, at random states: G by central differences of f; gamma = G A - f̈
+    // along the motion X0 + V t + A t² / 2, f̈ by second differences.
+    let mut seed = 0x5eed_0f34_b000_0001u64;
+    let (mut worst_g, mut worst_gamma) = (0.0f64, 0.0f64);
+    for _ in 0..16 {
+        let x0: Vec<f64> = (0..5).map(|_| random(&mut seed)).collect();
+        let v: Vec<f64> = (0..5).map(|_| 2.0 * random(&mut seed)).collect();
+        let a: Vec<f64> = (0..5).map(|_| 2.0 * random(&mut seed)).collect();
+        let gx = g(&x0);
+        for c in 0..5 {
+            let hc = f64::EPSILON.cbrt() * x0[c].abs().max(1.0);
+            let (mut xp, mut xm) = (x0.clone(), x0.clone());
+            xp[c] += hc;
+            xm[c] -= hc;
+            let (fp, fm) = (f(&xp), f(&xm));
+            for r in 0..3 {
+                let num = (fp[r] - fm[r]) / (2.0 * hc);
+                worst_g = worst_g.max((gx[r][c] - num).abs() / (1.0 + num.abs()));
+            }
+        }
+        let at = |t: f64| -> Vec<f64> {
+            (0..5)
+                .map(|i| x0[i] + v[i] * t + 0.5 * a[i] * t * t)
+                .collect()
+        };
+        let (f0, fp, fm) = (f(&x0), f(&at(h)), f(&at(-h)));
+        let gam = gamma(&x0, &v);
+        for r in 0..3 {
+            let fdd = (fp[r] - 2.0 * f0[r] + fm[r]) / (h * h);
+            let ga: f64 = (0..5).map(|c| gx[r][c] * a[c]).sum();
+            let want = ga - fdd;
+            worst_gamma = worst_gamma.max((gam[r] - want).abs() / (1.0 + want.abs()));
+        }
+        // A nonlinear coupling's gamma is not zero off its rest.
+        assert!(gam[0] != 0.0 && gam[1] != 0.0, "{gam:?}");
+    }
+    println!("G vs central differences {worst_g:e}, gamma vs second differences {worst_gamma:e}");
+    assert!(worst_g < 1e-8, "G: {worst_g:e}");
+    assert!(worst_gamma < 1e-6, "gamma: {worst_gamma:e}");
 }

@@ -6,7 +6,8 @@
 //! - a hinge's axis: `E_ik` for the two axes `i` other than the hinge axis `k` (axis `k` of `b`
 //!   has no component along the other axes of `a`);
 //! - a distance: `(|d|² - L²) / (2 L)`, `d = p_a - p_b` (metres, `|d| - L` to first order);
-//! - a coupling: `X_a - ratio X_b - offset`.
+//! - a coupling: `a - p(b)`, `p(b) = c0 + c1 b + c2 b² + …` (`ratio b + offset`), `a` and `b`
+//!   expressions of the coordinates.
 //!
 //! What the equations leave open is checked after every position solve (`checks`): a point's
 //! components left out (not for `point_in_plane` / `point_on_line`, whose other components are
@@ -179,18 +180,22 @@ pub(super) fn closure(
     };
     let zero3 = [Graph::ZERO; 3];
     for lp in &model.loops {
-        if let LoopKind::Coupling {
-            a,
-            b: bc,
-            ratio,
-            offset,
-        } = &lp.kind
-        {
-            let (xa, xb) = (b.g.x(*a), b.g.x(*bc));
-            let (r, o) = (b.expr(ratio), b.expr(offset));
-            let rx = b.g.mul(r, xb);
-            let rhs = b.g.add(rx, o);
+        if let LoopKind::Coupling { a, b: side_b, poly } = &lp.kind {
+            // a - p(b), p by Horner's rule from the highest coefficient down (`ratio * b +
+            // offset` for a linear coupling); G and gamma follow by the chain rule (gamma =
+            // p''(b) ḃ² + p'(b) (b̈ at Xddot = 0) - (ä at Xddot = 0)).
+            let xa = b.expr(a);
+            let xb = side_b.as_ref().map(|e| b.expr(e));
+            let coefs: Vec<Id> = poly.iter().rev().map(|c| b.expr(c)).collect();
+            let mut rhs = coefs[0];
+            if let Some(xb) = xb {
+                for &c in &coefs[1..] {
+                    let px = b.g.mul(rhs, xb);
+                    rhs = b.g.add(px, c);
+                }
+            }
             let e = b.g.sub(xa, rhs);
+            constant(&b.g, e, lp, "the coupling");
             let none = [(zero3, Vec::new()), (zero3, Vec::new())];
             rows.push(e, format!("{}.coupling", lp.name), &none, [zero3; 2]);
             continue;

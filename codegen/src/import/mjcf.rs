@@ -13,9 +13,10 @@
 //! | `<default class>`, `class`, `childclass` | attribute defaults of joints, geoms and actuators |
 //! | `<equality><connect>` | a `ball` loop (`site1`/`site2`, or `body1`, `body2`, `anchor` with body2's point found at `qpos0`) |
 //! | `<equality><weld>` | a `weld` loop (`relpose`, or the relative pose at `qpos0`) |
-//! | `<equality><joint polycoef>` | a `coupling` (linear `polycoef` only) |
+//! | `<equality><joint joint1 joint2 polycoef>` | a `coupling`: `a` = joint1, `b` = joint2, each counted from `qpos0` (`"q - ref"`); `ratio`/`offset` when linear, else `poly`; without joint2 (or with c1..c4 zero) `a = c0` |
+//! | `<equality><tendon tendon1 tendon2 polycoef>` on `<fixed>` tendons | a `coupling` between the tendons' lengths from `qpos0`, `Σ coef (q - ref)`; a spatial tendon is refused (a path's length) |
 //! | `<actuator>` with `joint` | the actuated coordinates; its `gear` (first entry) the coordinate's `gear` (U in the motor's units) |
-//! | `<actuator>` with `tendon`, `site` or `body`, `<tendon>`, `<sensor>` | skipped, a warning each |
+//! | `<actuator>` with `tendon`, `site` or `body`, `<tendon>` no equality couples, `<sensor>` | skipped, a warning each (a coupled tendon's stiffness, damping, friction, range: a warning) |
 //! | `<option gravity>` | `gravity` |
 //! | `<include file>` | the included file's elements in its place (each file once) |
 
@@ -60,8 +61,11 @@ struct Ctx<'a, 'i> {
     placed: HashMap<String, Placed>,
     /// site name -> (body, position and rotation in the body, node).
     sites: HashMap<String, (String, [f64; 3], Mat, Node<'a, 'i>)>,
-    /// joint name -> (its coordinates, kind).
-    joints: HashMap<String, (Vec<String>, &'static str)>,
+    /// joint name -> (its coordinates, kind, its value counted from `qpos0` as an expression:
+    /// `"q"`, or `"q - ref"`).
+    joints: HashMap<String, (Vec<String>, &'static str, String)>,
+    /// tendon name -> its `<fixed>` or `<spatial>` element.
+    tendons: HashMap<String, Node<'a, 'i>>,
     bodies_seen: usize,
     /// `<include file>` -> the included file's root.
     includes: Vec<(&'a str, Node<'a, 'i>)>,
@@ -193,6 +197,7 @@ pub(super) fn import<'a, 'i>(
         placed: HashMap::new(),
         sites: HashMap::new(),
         joints: HashMap::new(),
+        tendons: HashMap::new(),
         bodies_seen: 0,
         includes: includes.to_vec(),
     };
@@ -222,9 +227,18 @@ pub(super) fn import<'a, 'i>(
             walk(cx, b, "world", WORLD, None, &mut ctx, &mut out);
         }
     }
+    for t in kids_named(&ctx, root, "tendon") {
+        for k in kids(&ctx, t) {
+            if let Some(n) = k.attribute("name") {
+                ctx.tendons.insert(n.to_string(), k);
+            }
+        }
+    }
+    // The tendons the equalities couple.
+    let mut coupled: Vec<String> = Vec::new();
     for e in kids_named(&ctx, root, "equality") {
         for q in kids(&ctx, e) {
-            equality(cx, q, &ctx, &mut out);
+            equality(cx, q, &ctx, &mut out, &mut coupled);
         }
     }
     for a in kids_named(&ctx, root, "actuator") {
@@ -232,10 +246,38 @@ pub(super) fn import<'a, 'i>(
             actuator(cx, m, &ctx, &mut out);
         }
     }
-    // Tendons are not in the model language: each is skipped with a warning (a fixed or
-    // spatial tendon's stiffness, damping or limits would act on the joints).
+    // A tendon is in the model only through its equalities (a fixed tendon's length is an
+    // expression of the coordinates): the others are skipped with a warning, and a coupled
+    // one's stiffness, damping, friction or limits are not applied (a warning too).
     for t in kids_named(&ctx, root, "tendon") {
         for k in kids(&ctx, t) {
+            if k.attribute("name")
+                .is_some_and(|n| coupled.iter().any(|c| c == n))
+            {
+                let forces = ["stiffness", "damping", "frictionloss", "range"]
+                    .into_iter()
+                    .filter(|a| {
+                        k.attribute(*a).is_some_and(|v| {
+                            v.split_ascii_whitespace()
+                                .any(|x| x.parse::<f64>() != Ok(0.0))
+                        })
+                    })
+                    .collect::<Vec<_>>();
+                if !forces.is_empty() {
+                    cx.warn(
+                        &cx.tag(k),
+                        format!(
+                            "tendon `{}`'s {} {} not applied",
+                            k.attribute("name").unwrap_or_default(),
+                            forces.join(", "),
+                            if forces.len() == 1 { "is" } else { "are" }
+                        ),
+                        "not applied",
+                        "the tendon is in the model through its equality only: a coupling of its length",
+                    );
+                }
+                continue;
+            }
             cx.warn(
                 &cx.tag(k),
                 format!(
@@ -847,7 +889,7 @@ fn joint<'a, 'i>(
         .joints
         .insert(
             j.attribute("name").unwrap_or(&name).to_string(),
-            (coords, kind_static),
+            (coords, kind_static, q_expr.clone()),
         )
         .is_some()
     {
@@ -1105,7 +1147,13 @@ fn attachment(body: &str, p: [f64; 3], r: Option<&Mat>) -> String {
     }
 }
 
-fn equality(cx: &mut Cx<'_>, q: Node<'_, '_>, ctx: &Ctx<'_, '_>, out: &mut Imported) {
+fn equality(
+    cx: &mut Cx<'_>,
+    q: Node<'_, '_>,
+    ctx: &Ctx<'_, '_>,
+    out: &mut Imported,
+    coupled: &mut Vec<String>,
+) {
     let tag = q.tag_name().name();
     let name = q
         .attribute("name")
@@ -1218,55 +1266,59 @@ fn equality(cx: &mut Cx<'_>, q: Node<'_, '_>, ctx: &Ctx<'_, '_>, out: &mut Impor
                 ("b", b),
             ]
         }
-        "joint" => {
-            let coord = |cx: &mut Cx<'_>, key: &str| -> Option<String> {
-                let j = cx.required(q, key)?;
-                match ctx.joints.get(j) {
-                    Some((c, "hinge" | "slide")) => Some(c[0].clone()),
-                    Some(_) => {
-                        cx.error(
-                            &cx.attr_range(q, key),
-                            format!("joint `{j}` is a ball joint"),
-                            "",
-                            "a joint equality couples hinge and slide joints",
-                        );
-                        None
-                    }
-                    None => {
-                        cx.error(
-                            &cx.attr_range(q, key),
-                            format!("unknown joint `{j}`"),
-                            "no `<joint>` of this name",
-                            "",
-                        );
-                        None
-                    }
+        "joint" | "tendon" => {
+            let keys_of = if tag == "joint" {
+                ["joint1", "joint2"]
+            } else {
+                ["tendon1", "tendon2"]
+            };
+            // Each side counted from qpos0, as MuJoCo's equality counts it: a joint's `q - ref`,
+            // a fixed tendon's length minus its length at qpos0, `Σ coef (q - ref)`.
+            let mut side = |cx: &mut Cx<'_>, key: &str| -> Option<String> {
+                let name = cx.required(q, key)?;
+                if tag == "joint" {
+                    joint_side(cx, q, key, name, ctx)
+                } else {
+                    coupled.push(name.to_string());
+                    tendon_side(cx, q, key, name, ctx)
                 }
             };
-            let (Some(a), Some(b)) = (coord(cx, "joint1"), coord(cx, "joint2")) else {
-                return;
+            let a = side(cx, keys_of[0]);
+            let b = match q.attribute(keys_of[1]) {
+                None => Some(None),
+                Some(_) => side(cx, keys_of[1]).map(Some),
             };
             let coef = q
                 .attribute_node("polycoef")
                 .and_then(|_| cx.numbers(q, "polycoef", 5));
+            let (Some(a), Some(b)) = (a, b) else {
+                return;
+            };
             let mut keys = vec![
                 ("name", quote(&name)),
                 ("kind", quote("coupling")),
                 ("a", quote(&a)),
-                ("b", quote(&b)),
             ];
-            if let Some(c) = coef {
-                if c[2..].iter().any(|x| x.1 != 0.0) {
-                    cx.error(
-                        &cx.attr_range(q, "polycoef"),
-                        "a polynomial coupling of degree above 1",
-                        "only `c0 c1 0 0 0`",
-                        "a coupling is linear: a = ratio * b + offset",
-                    );
-                    return;
+            // MuJoCo's `a = c0 + c1 b + … + c4 b⁴`; without `b` (or with c1..c4 zero), `a = c0`.
+            let c: Vec<(String, f64)> =
+                coef.unwrap_or_else(|| vec![("0".to_string(), 0.0), ("1".to_string(), 1.0)]);
+            let degree = c.iter().rposition(|x| x.1 != 0.0).unwrap_or(0);
+            let offset = (c[0].1 != 0.0).then(|| ("offset", number(&c[0].0, c[0].1)));
+            match b {
+                Some(b) if degree > 0 => {
+                    keys.push(("b", quote(&b)));
+                    if degree == 1 {
+                        if q.attribute("polycoef").is_some() {
+                            keys.push(("ratio", number(&c[1].0, c[1].1)));
+                            keys.push(("offset", number(&c[0].0, c[0].1)));
+                        }
+                    } else {
+                        let poly: Vec<String> =
+                            c[..=degree].iter().map(|x| number(&x.0, x.1)).collect();
+                        keys.push(("poly", format!("[{}]", poly.join(", "))));
+                    }
                 }
-                keys.push(("ratio", number(&c[1].0, c[1].1)));
-                keys.push(("offset", number(&c[0].0, c[0].1)));
+                _ => keys.extend(offset),
             }
             keys
         }
@@ -1275,12 +1327,128 @@ fn equality(cx: &mut Cx<'_>, q: Node<'_, '_>, ctx: &Ctx<'_, '_>, out: &mut Impor
                 &cx.tag(q),
                 format!("`<{other}>` equalities are not supported"),
                 "",
-                "connect, weld and joint are",
+                "connect, weld, joint and tendon are",
             );
             return;
         }
     };
     out.loops.push(LoopOut { keys, origin });
+}
+
+/// A joint equality's side: the joint's coordinate counted from `qpos0` (`"q"`, `"q - ref"`).
+fn joint_side(
+    cx: &mut Cx<'_>,
+    q: Node<'_, '_>,
+    key: &str,
+    j: &str,
+    ctx: &Ctx<'_, '_>,
+) -> Option<String> {
+    match ctx.joints.get(j) {
+        Some((_, "hinge" | "slide", shifted)) => Some(shifted.clone()),
+        Some(_) => {
+            let in_tendon = q
+                .parent_element()
+                .is_some_and(|p| p.tag_name().name() == "fixed");
+            let help = if in_tendon {
+                "a fixed tendon's joints are hinge and slide joints (MuJoCo's too)"
+            } else {
+                "a joint equality couples hinge and slide joints"
+            };
+            cx.error(
+                &cx.attr_range(q, key),
+                format!("joint `{j}` is a ball joint"),
+                "",
+                help,
+            );
+            None
+        }
+        None => {
+            cx.error(
+                &cx.attr_range(q, key),
+                format!("unknown joint `{j}`"),
+                "no `<joint>` of this name",
+                "",
+            );
+            None
+        }
+    }
+}
+
+/// A tendon equality's side: a fixed tendon's length minus its length at `qpos0`,
+/// `Σ coef (q - ref)` over its joints. A spatial tendon is refused: its length is a path's.
+fn tendon_side(
+    cx: &mut Cx<'_>,
+    q: Node<'_, '_>,
+    key: &str,
+    t: &str,
+    ctx: &Ctx<'_, '_>,
+) -> Option<String> {
+    let Some(&node) = ctx.tendons.get(t) else {
+        cx.error(
+            &cx.attr_range(q, key),
+            format!("unknown tendon `{t}`"),
+            "no `<tendon>` element of this name",
+            "",
+        );
+        return None;
+    };
+    if node.tag_name().name() != "fixed" {
+        cx.error(
+            &cx.attr_range(q, key),
+            format!("tendon `{t}` is a spatial tendon"),
+            "only fixed tendons can be coupled",
+            "a spatial tendon's length is the length of a path through its sites and around its \
+             wrapping geoms, which no expression of the coordinates writes; a fixed tendon's, \
+             Σ coef q, is one",
+        );
+        return None;
+    }
+    let mut text = String::new();
+    let mut ok = true;
+    for jn in kids(ctx, node)
+        .into_iter()
+        .filter(|c| c.tag_name().name() == "joint")
+    {
+        let (Some(j), Some(coef)) = (
+            cx.required(jn, "joint"),
+            cx.required(jn, "coef")
+                .and_then(|_| cx.numbers(jn, "coef", 1)),
+        ) else {
+            ok = false;
+            continue;
+        };
+        let Some(mut shifted) = joint_side(cx, jn, "joint", j, ctx) else {
+            ok = false;
+            continue;
+        };
+        if shifted.contains(' ') {
+            shifted = format!("({shifted})");
+        }
+        let (ct, cv) = &coef[0];
+        let negative = *cv < 0.0;
+        let magnitude = number(ct.strip_prefix('-').unwrap_or(ct), cv.abs());
+        let term = if cv.abs() == 1.0 {
+            shifted
+        } else {
+            format!("{magnitude} * {shifted}")
+        };
+        text = match (text.is_empty(), negative) {
+            (true, false) => term,
+            (true, true) => format!("-{term}"),
+            (false, false) => format!("{text} + {term}"),
+            (false, true) => format!("{text} - {term}"),
+        };
+    }
+    if ok && text.is_empty() {
+        cx.error(
+            &cx.tag(node),
+            format!("tendon `{t}` has no joints"),
+            "an empty fixed tendon",
+            "a fixed tendon's length is Σ coef q over its `<joint joint coef>` elements",
+        );
+        return None;
+    }
+    ok.then_some(text)
 }
 
 fn actuator(cx: &mut Cx<'_>, m: Node<'_, '_>, ctx: &Ctx<'_, '_>, out: &mut Imported) {
@@ -1305,7 +1473,7 @@ fn actuator(cx: &mut Cx<'_>, m: Node<'_, '_>, ctx: &Ctx<'_, '_>, out: &mut Impor
         return;
     };
     match ctx.joints.get(j) {
-        Some((c, "hinge" | "slide")) => {
+        Some((c, "hinge" | "slide", _)) => {
             // MuJoCo's force on the joint is gear * ctrl, rbss's with `gear`: the same.
             if let Some(n) = lookup(cx, ctx, m, None, "gear")
                 && let Some(g) = cx.numbers(n, "gear", 0)

@@ -69,7 +69,7 @@ impl<'s> Parser<'s> {
                             "\"point\" (the default, alias \"ball\"): the two points coincide; \
                              \"weld\": the two frames coincide; \"hinge\": a point and an axis; \
                              \"distance\": a rod of `length`; \"coupling\": two coordinates \
-                             geared (`ratio`, `offset`); \"point_in_plane\", \"point_on_line\": \
+                             geared (`ratio`, `offset`, or a polynomial `poly`); \"point_in_plane\", \"point_on_line\": \
                              `components` constrained, the others free"
                                 .to_string(),
                         );
@@ -81,7 +81,15 @@ impl<'s> Parser<'s> {
         };
         // Keys that belong to other kinds.
         if let Some(tag) = tag {
-            for key in ["components", "frame", "length", "ratio", "offset", "axis"] {
+            for key in [
+                "components",
+                "frame",
+                "length",
+                "ratio",
+                "offset",
+                "poly",
+                "axis",
+            ] {
                 if !tag.allows(key) {
                     let Some(ks) = key_span(t, key) else { continue };
                     let d = self.cx.error(
@@ -94,71 +102,7 @@ impl<'s> Parser<'s> {
             }
         }
         if tag == Some(Tag::Coupling) {
-            let a_v = self.required(t, &span, "a", &format!("loop `{shown}`"));
-            let b_v = self.required(t, &span, "b", &format!("loop `{shown}`"));
-            let ca = a_v.and_then(|v| self.coordinate_ref(v, &shown, "a"));
-            let cb = b_v.and_then(|v| self.coordinate_ref(v, &shown, "b"));
-            let what = format!("the ratio of loop `{shown}`");
-            let ratio = match get(t, "ratio") {
-                None => Some(Expr::int(1)),
-                Some(rv) => self
-                    .finite(rv, &Scope::constant(&what))
-                    .and_then(|(e, r, bad)| {
-                        if !bad && r == 0.0 {
-                            let d = self.cx.error(
-                                &rv.span(),
-                                format!("{what} is zero"),
-                                "evaluates to 0",
-                            );
-                            d.help = Some(
-                                "`a = ratio * b + offset`: with a zero ratio `a` is a constant; \
-                             remove the coordinate instead"
-                                    .to_string(),
-                            );
-                            return None;
-                        }
-                        Some(e)
-                    }),
-            };
-            let what = format!("the offset of loop `{shown}`");
-            let offset = match get(t, "offset") {
-                None => Some(Expr::int(0)),
-                Some(ov) => self.finite(ov, &Scope::constant(&what)).map(|r| r.0),
-            };
-            let (ca, cb) = (ca?, cb?);
-            if ca == cb {
-                let bv = b_v?;
-                self.cx.error(
-                    &bv.span(),
-                    format!("both sides of coupling `{shown}` are the same coordinate"),
-                    "the same coordinate as `a`",
-                );
-                return None;
-            }
-            let here = name_v.map(|v| v.span()).unwrap_or(span.clone());
-            self.loop_sites.push([here.clone(), here]);
-            return Some(Loop {
-                name: name?,
-                a: Attachment {
-                    body: None,
-                    steps: Vec::new(),
-                },
-                b: Attachment {
-                    body: None,
-                    steps: Vec::new(),
-                },
-                components: Vec::new(),
-                frame: None,
-                kind: LoopKind::Coupling {
-                    a: ca,
-                    b: cb,
-                    ratio: ratio?,
-                    offset: offset?,
-                },
-                pos: self
-                    .cx
-                    .pos(name_v.map(|v| v.span().start).unwrap_or(span.start)),
-            });
+            return self.coupling(t, &span, name, name_v, &shown);
         }
         let a_v = self.required(t, &span, "a", &format!("loop `{shown}`"));
         let b_v = self.required(t, &span, "b", &format!("loop `{shown}`"));
@@ -288,6 +232,213 @@ impl<'s> Parser<'s> {
         };
         self.loop_sites.push(sites);
         Some(l)
+    }
+
+    /// A `kind = "coupling"` loop: `a = p(b)` between two expressions of the coordinates, `p`
+    /// from `ratio` and `offset` (`ratio * b + offset`) or from `poly` (`c0 + c1 b + …`).
+    fn coupling(
+        &mut self,
+        t: &DeTable<'_>,
+        span: &Span,
+        name: Option<String>,
+        name_v: Option<&Value<'_>>,
+        shown: &str,
+    ) -> Option<Loop> {
+        let a_v = self.required(t, span, "a", &format!("loop `{shown}`"));
+        let b_v = get(t, "b");
+        let ca = a_v.and_then(|v| self.coupling_side(v, shown, "a"));
+        let cb = b_v.map(|v| self.coupling_side(v, shown, "b"));
+        let poly_v = get(t, "poly");
+        let mut ok = true;
+        // `poly` or `ratio` and `offset`: one spelling of the polynomial.
+        if poly_v.is_some() {
+            for key in ["ratio", "offset"] {
+                let Some(ks) = key_span(t, key) else { continue };
+                let d = self.cx.error(
+                    &ks,
+                    format!("loop `{shown}` has both `poly` and `{key}`"),
+                    "give one or the other",
+                );
+                d.help = Some(
+                    "`poly = [c0, c1, c2, …]` is `a = c0 + c1 b + c2 b² + …`; `ratio` and \
+                     `offset` are its linear case, `poly = [offset, ratio]`"
+                        .to_string(),
+                );
+                ok = false;
+            }
+        }
+        let what = format!("the ratio of loop `{shown}`");
+        let ratio = match get(t, "ratio") {
+            None => Some(Expr::int(1)),
+            Some(rv) => self
+                .finite(rv, &Scope::constant(&what))
+                .and_then(|(e, r, bad)| {
+                    if !bad && r == 0.0 {
+                        let d =
+                            self.cx
+                                .error(&rv.span(), format!("{what} is zero"), "evaluates to 0");
+                        d.help = Some(
+                            "`a = ratio * b + offset`: with a zero ratio `a` is a constant; \
+                             remove the coordinate instead"
+                                .to_string(),
+                        );
+                        return None;
+                    }
+                    Some(e)
+                }),
+        };
+        let what = format!("the offset of loop `{shown}`");
+        let offset = match get(t, "offset") {
+            None => Some(Expr::int(0)),
+            Some(ov) => self.finite(ov, &Scope::constant(&what)).map(|r| r.0),
+        };
+        let poly = match poly_v {
+            None => match (ratio, offset) {
+                // Without `b`, `a = offset` (a ratio is reported below).
+                (Some(r), Some(o)) if b_v.is_some() => Some(vec![o, r]),
+                (_, Some(o)) => Some(vec![o]),
+                _ => None,
+            },
+            Some(pv) => self.poly(pv, shown, b_v.is_some()),
+        };
+        if b_v.is_none() {
+            let extra = match (get(t, "ratio"), poly_v) {
+                (Some(rv), _) => Some((rv.span(), "a `ratio`".to_string())),
+                (None, Some(pv)) => match pv.get_ref() {
+                    DeValue::Array(items) if items.len() > 1 => {
+                        Some((pv.span(), format!("{} coefficients", items.len())))
+                    }
+                    _ => None,
+                },
+                (None, None) => None,
+            };
+            if let Some((at, what)) = extra {
+                let d = self.cx.error(
+                    &at,
+                    format!("coupling `{shown}` has {what} but no `b`"),
+                    "nothing to multiply",
+                );
+                d.help = Some(
+                    "without `b` a coupling holds `a` at a constant: `a = offset` (or \
+                     `poly = [c0]`); name the other side with `b`"
+                        .to_string(),
+                );
+                ok = false;
+            }
+        }
+        let ca = ca?;
+        let cb = match cb {
+            Some(side) => Some(side?),
+            None => None,
+        };
+        if let (Some(cb), Some(bv)) = (&cb, b_v)
+            && ca == *cb
+        {
+            let what = if matches!(ca, Expr::Coord(_)) {
+                "coordinate"
+            } else {
+                "expression"
+            };
+            self.cx.error(
+                &bv.span(),
+                format!("both sides of coupling `{shown}` are the same {what}"),
+                format!("the same {what} as `a`"),
+            );
+            return None;
+        }
+        let here = name_v.map(|v| v.span()).unwrap_or(span.clone());
+        self.loop_sites.push([here.clone(), here]);
+        let poly = poly?;
+        if !ok {
+            return None;
+        }
+        Some(Loop {
+            name: name?,
+            a: Attachment {
+                body: None,
+                steps: Vec::new(),
+            },
+            b: Attachment {
+                body: None,
+                steps: Vec::new(),
+            },
+            components: Vec::new(),
+            frame: None,
+            kind: LoopKind::Coupling { a: ca, b: cb, poly },
+            pos: self
+                .cx
+                .pos(name_v.map(|v| v.span().start).unwrap_or(span.start)),
+        })
+    }
+
+    /// A coupling's `poly`: one or more constant expressions, `c0` first; with `b`, not all of
+    /// `c1, c2, …` zero.
+    fn poly(&mut self, v: &Value<'_>, shown: &str, with_b: bool) -> Option<Vec<Expr>> {
+        let what = format!("the polynomial of loop `{shown}`");
+        let items = self.array(v, &what)?;
+        if items.is_empty() {
+            let d = self.cx.error(
+                &v.span(),
+                format!("{what} is empty"),
+                "expected [c0, c1, …]",
+            );
+            d.help = Some("`poly = [c0, c1, c2, …]`: `a = c0 + c1 b + c2 b² + …`".to_string());
+            return None;
+        }
+        let mut out = Vec::with_capacity(items.len());
+        let mut constant_b = with_b && items.len() > 1;
+        for (k, item) in items.iter().enumerate() {
+            let what_k = format!("{what} (c{k})");
+            let (e, value, bad) = self.finite(item, &Scope::constant(&what_k))?;
+            if k > 0 && (bad || value != 0.0) {
+                constant_b = false;
+            }
+            out.push(e);
+        }
+        if constant_b || (with_b && items.len() == 1) {
+            let d = self.cx.error(
+                &v.span(),
+                format!("{what} does not depend on `b`"),
+                "c1, c2, … evaluate to 0",
+            );
+            d.help = Some(
+                "`a = c0 + c1 b + c2 b² + …`: with no term in `b`, `a` is a constant; remove \
+                 `b` (the coupling then holds `a` at `c0`)"
+                    .to_string(),
+            );
+            return None;
+        }
+        Some(out)
+    }
+
+    /// A coupling's side: a coordinate's name, or an expression of the coordinates (`"2 * q1 +
+    /// 0.5 * q3"`, a fixed tendon's length).
+    fn coupling_side(&mut self, v: &Value<'_>, loop_name: &str, side: &str) -> Option<Expr> {
+        let is_name = v.get_ref().as_str().is_some_and(|s| {
+            s.chars()
+                .next()
+                .is_some_and(|c| c.is_alphabetic() || c == '_')
+                && s.chars().all(|c| c.is_alphanumeric() || c == '_')
+        });
+        if is_name {
+            return self.coordinate_ref(v, loop_name, side).map(Expr::Coord);
+        }
+        let what = format!("`{side}` of coupling `{loop_name}`");
+        let r = self.expr(v, &Scope::transform(&what))?;
+        if r.expr.is_constant() {
+            let d = self.cx.error(
+                &v.span(),
+                format!("{what} does not depend on any coordinate"),
+                "a constant",
+            );
+            d.help = Some(
+                "a coupling relates two expressions of the coordinates: a coordinate's name, \
+                 or e.g. `\"2 * q1 + 0.5 * q3\"`; a constant side is the `offset`"
+                    .to_string(),
+            );
+            return None;
+        }
+        Some(r.expr)
     }
 
     /// A coupling's side: the name of a coordinate.
@@ -489,7 +640,7 @@ impl Tag {
         match key {
             "components" | "frame" => !matches!(self, Tag::Distance | Tag::Coupling),
             "length" => self == Tag::Distance,
-            "ratio" | "offset" => self == Tag::Coupling,
+            "ratio" | "offset" | "poly" => self == Tag::Coupling,
             "axis" => self == Tag::Hinge,
             _ => true,
         }

@@ -10,31 +10,29 @@
 use super::*;
 
 fn coords_of(steps: &[Step], out: &mut [bool]) {
-    fn walk(e: &Expr, out: &mut [bool]) {
-        match e {
-            Expr::Coord(j) => {
-                if let Some(u) = out.get_mut(*j) {
-                    *u = true;
-                }
-            }
-            Expr::Num { .. } | Expr::Pi | Expr::Param(_) => {}
-            Expr::Neg(a) => walk(a, out),
-            Expr::Call(_, args) => args.iter().for_each(|a| walk(a, out)),
-            Expr::Add(a, b)
-            | Expr::Sub(a, b)
-            | Expr::Mul(a, b)
-            | Expr::Div(a, b)
-            | Expr::Pow(a, b) => {
-                walk(a, out);
-                walk(b, out);
-            }
-        }
-    }
     for s in steps {
         match s {
             Step::Rot(_, e) | Step::Trans(_, e) => walk(e, out),
             Step::Rotation(m) => m.iter().flatten().for_each(|e| walk(e, out)),
             Step::Quat(q) => q.iter().for_each(|e| walk(e, out)),
+        }
+    }
+}
+
+/// Marks the coordinates an expression reads.
+fn walk(e: &Expr, out: &mut [bool]) {
+    match e {
+        Expr::Coord(j) => {
+            if let Some(u) = out.get_mut(*j) {
+                *u = true;
+            }
+        }
+        Expr::Num { .. } | Expr::Pi | Expr::Param(_) => {}
+        Expr::Neg(a) => walk(a, out),
+        Expr::Call(_, args) => args.iter().for_each(|a| walk(a, out)),
+        Expr::Add(a, b) | Expr::Sub(a, b) | Expr::Mul(a, b) | Expr::Div(a, b) | Expr::Pow(a, b) => {
+            walk(a, out);
+            walk(b, out);
         }
     }
 }
@@ -70,12 +68,11 @@ impl Parser<'_> {
             .iter()
             .map(|l| {
                 let mut s = [side(&l.a), side(&l.b)];
-                // A coupling's sides are its two coordinates.
-                if let LoopKind::Coupling { a, b, .. } = l.kind {
-                    for (k, j) in [a, b].into_iter().enumerate() {
-                        if let Some(c) = s[k].get_mut(j) {
-                            *c = true;
-                        }
+                // A coupling's sides are the coordinates of its two expressions.
+                if let LoopKind::Coupling { a, b, .. } = &l.kind {
+                    walk(a, &mut s[0]);
+                    if let Some(b) = b {
+                        walk(b, &mut s[1]);
                     }
                 }
                 // A unit norm's side is its quaternion.

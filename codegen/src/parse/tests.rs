@@ -898,18 +898,18 @@ fn loop_kinds_parse() {
     assert_eq!(knee.frame, Some(Side::A));
     assert!(matches!(knee.kind, LoopKind::Point));
     assert_eq!(knee.components, [Axis::X, Axis::Z]);
-    let LoopKind::Coupling {
-        a,
-        b,
-        ratio,
-        offset,
-    } = &leg.loops[1].kind
-    else {
+    let LoopKind::Coupling { a, b, poly } = &leg.loops[1].kind else {
         panic!("a coupling");
     };
-    assert_eq!((*a, *b), (1, 0), "a = h, b = mo");
-    assert!(close(ratio.eval(&values(&leg), &[]), 0.1, 1e-15));
-    assert_eq!(*offset, Expr::int(0));
+    assert_eq!(
+        (a, b),
+        (&Expr::Coord(1), &Some(Expr::Coord(0))),
+        "a = h, b = mo"
+    );
+    // `ratio` and `offset` are the polynomial `[offset, ratio]`.
+    assert_eq!(poly.len(), 2);
+    assert!(close(poly[1].eval(&values(&leg), &[]), 0.1, 1e-15));
+    assert_eq!(poly[0], Expr::int(0));
     assert_eq!(leg.loops.iter().map(Loop::equations).sum::<usize>(), 3);
     let rod = parse_ok(
         "models/four_bar_rod.toml",

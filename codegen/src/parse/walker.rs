@@ -162,6 +162,7 @@ pub(super) const LOOP_KEYS: &[&str] = &[
     "length",
     "ratio",
     "offset",
+    "poly",
     "axis",
     "count",
 ];
