@@ -1499,3 +1499,51 @@ pub(crate) fn age_text(s: u64) -> String {
         _ => format!("{} d", s / 86_400),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A mesh file the MJCF source names (in an included file, under `<compiler meshdir>`) is in
+    /// the key: editing it changes the key; the generator's hashes (the model's, the source's
+    /// with its includes) do not cover it and stay.
+    #[test]
+    fn mesh_files_are_in_the_key() {
+        let tmp = tempfile::tempdir().unwrap();
+        let d = tmp.path();
+        std::fs::create_dir_all(d.join("parts")).unwrap();
+        std::fs::write(d.join("robot.toml"), "mjcf = \"robot.xml\"\n").unwrap();
+        std::fs::write(
+            d.join("robot.xml"),
+            "<mujoco><compiler meshdir=\"parts\"/><include file=\"assets.xml\"/>\
+             <worldbody/></mujoco>",
+        )
+        .unwrap();
+        std::fs::write(
+            d.join("assets.xml"),
+            "<mujoco><asset><!-- <mesh file=\"commented.obj\"/> -->\
+             <mesh name=\"m\" file=\"a.obj\"/></asset></mujoco>",
+        )
+        .unwrap();
+        let obj = d.join("parts/a.obj");
+        std::fs::write(&obj, "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\n").unwrap();
+        let read = || Inputs::read(&d.join("robot.toml")).unwrap();
+        let first = read();
+        assert_eq!(first.meshes.len(), 1, "{:?}", first.meshes);
+        assert_eq!(
+            first.meshes[0].0,
+            d.canonicalize().unwrap().join("parts/a.obj")
+        );
+        std::fs::write(&obj, "v 0 0 0\nv 2 0 0\nv 0 1 0\nv 0 0 1\n").unwrap();
+        let second = read();
+        assert_ne!(
+            first.hash(),
+            second.hash(),
+            "an edited mesh must change the key"
+        );
+        assert_eq!(first.generator_hashes(), second.generator_hashes());
+        // A mesh file that is missing is not in the key (the generator reports it if used).
+        std::fs::remove_file(&obj).unwrap();
+        assert!(read().meshes.is_empty());
+    }
+}
