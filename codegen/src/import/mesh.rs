@@ -376,6 +376,12 @@ pub(crate) fn mass_properties(mesh: &Mesh, mode: Inertia) -> Result<MassProps, S
                     + e[s] * g[r]);
         }
     }
+    // An open surface's volume depends on the apex: about the centre of mass it may vanish.
+    if volume < MINVAL {
+        return Err(format!(
+            "its volume about its centre of mass is {volume:e}: the surface is not closed"
+        ));
+    }
     let inertia =
         geom::inertia_matrix([p[1] + p[2], p[0] + p[2], p[0] + p[1], -p[3], -p[4], -p[5]]);
     Ok(MassProps {

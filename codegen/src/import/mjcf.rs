@@ -9,7 +9,9 @@
 //! | joint `stiffness`, `springref`, `damping`, `armature` | `stiffness`, `rest`, `damping`, `armature` |
 //! | joint `ref` (hinge, slide) | the steps move by `q - ref` and the coordinate's home is `ref` (MuJoCo's `qpos0`: the body as written) |
 //! | `<inertial pos quat mass diaginertia\|fullinertia>` | `mass`, `com`, `inertia` (in the body's axes) |
-//! | `<geom>` (no `<inertial>`, `<compiler inertiafromgeom>`) | the mass and inertia of the body's spheres, capsules, cylinders, boxes, ellipsoids (`density` 1000 or `mass`), as MuJoCo's compiler computes them |
+//! | `<geom>` (no `<inertial>`, `<compiler inertiafromgeom>`) | the mass and inertia of the body's spheres, capsules, cylinders, boxes, ellipsoids, meshes and height fields (`density` 1000 or `mass`), as MuJoCo's compiler computes them |
+//! | `<asset><mesh file\|vertex face scale refpos refquat inertia>`, `<compiler meshdir assetdir strippath>` | a mesh geom's volume, centre of mass and inertia ([`super::mesh`]: STL, OBJ; `legacy` by default, `exact`, `convex`, `shell`) in its file's frame, put where the geom is |
+//! | `<asset><hfield size>` | a height field geom's box (half sizes `x`, `y`, `elevation / 4 + base / 2`), as MuJoCo's |
 //! | `<default class>`, `class`, `childclass` | attribute defaults of joints, geoms and actuators |
 //! | `<equality><connect>` | a `ball` loop (`site1`/`site2`, or `body1`, `body2`, `anchor` with body2's point found at `qpos0`) |
 //! | `<equality><weld>` | a `weld` loop (`relpose`, or the relative pose at `qpos0`) |
