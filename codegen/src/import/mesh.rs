@@ -558,9 +558,9 @@ mod tests {
                 vol * (h[0] * h[0] + h[2] * h[2]) / 3.0,
                 vol * (h[0] * h[0] + h[1] * h[1]) / 3.0,
             ];
-            for i in 0..3 {
+            for (i, wi) in want.iter().enumerate() {
                 for j in 0..3 {
-                    let w = if i == j { want[i] } else { 0.0 };
+                    let w = if i == j { *wi } else { 0.0 };
                     assert!((p.inertia[i][j] - w).abs() < 1e-15, "{mode:?} I[{i}][{j}]");
                 }
             }
@@ -575,8 +575,8 @@ mod tests {
         let sy = 2.0 * 4.0 * a * c * b * b + 2.0 * (4.0 * b * c + 4.0 * a * b) * b * b / 3.0;
         let sz = 2.0 * 4.0 * a * b * c * c + 2.0 * (4.0 * b * c + 4.0 * a * c) * c * c / 3.0;
         let want = [sy + sz, sx + sz, sx + sy];
-        for k in 0..3 {
-            assert!((p.inertia[k][k] - want[k]).abs() < 1e-14, "{k}");
+        for (k, w) in want.iter().enumerate() {
+            assert!((p.inertia[k][k] - w).abs() < 1e-14, "{k}");
         }
     }
 

@@ -1324,9 +1324,9 @@ fn read_mesh(
             .map(|(_, f)| f.iter().map(|x| x.1).collect())
             .unwrap_or_default();
         let n = v.len() / 3;
-        if v.len() % 3 != 0
+        if !v.len().is_multiple_of(3)
             || n < 4
-            || f.len() % 3 != 0
+            || !f.len().is_multiple_of(3)
             || f.iter()
                 .any(|&i| i < 0.0 || i.fract() != 0.0 || i >= n as f64)
         {
