@@ -240,6 +240,10 @@ pub struct Inputs {
     files: Vec<(PathBuf, Vec<u8>)>,
     /// Whether the model names a source (then `files[1]` is it, the rest its includes).
     has_source: bool,
+    /// (path, bytes) of the mesh files an MJCF source's `<mesh file>`s name (those that
+    /// exist): hashed in the key (a mesh's inertia is in the robot), not in the generator's
+    /// hash of the source.
+    meshes: Vec<(PathBuf, Vec<u8>)>,
 }
 
 impl Inputs {
@@ -265,6 +269,7 @@ impl Inputs {
             path: path.clone(),
             files: Vec::new(),
             has_source: false,
+            meshes: Vec::new(),
         };
         // What the model names; a model that does not parse is the generator's to report.
         let source = std::str::from_utf8(&bytes)
@@ -316,8 +321,46 @@ impl Inputs {
                     }
                 }
             }
+            inputs.read_meshes(&src_dir);
         }
         Ok(inputs)
+    }
+
+    /// The mesh files of the MJCF source and its includes: each `<mesh file>` where the
+    /// generator reads it (`<compiler meshdir|assetdir|strippath>`,
+    /// [`rbss_codegen::import::mesh_path`]), each once, those that exist, at most 4096.
+    fn read_meshes(&mut self, src_dir: &Path) {
+        let (mut meshdir, mut assetdir, mut strip) = (None, None, false);
+        let mut files: Vec<String> = Vec::new();
+        for (_, bytes) in &self.files[1..] {
+            let text = String::from_utf8_lossy(bytes);
+            for (tag, attrs) in xml_tags(
+                &text,
+                &["compiler", "mesh"],
+                &["file", "meshdir", "assetdir", "strippath"],
+            ) {
+                for (k, v) in attrs {
+                    match (tag.as_str(), k.as_str()) {
+                        ("compiler", "meshdir") => meshdir = Some(v),
+                        ("compiler", "assetdir") => assetdir = Some(v),
+                        ("compiler", "strippath") => strip = v == "true",
+                        ("mesh", "file") if !files.contains(&v) => files.push(v),
+                        _ => {}
+                    }
+                }
+            }
+        }
+        let dir = meshdir.as_deref().or(assetdir.as_deref());
+        for f in files.iter().take(4096) {
+            let p = rbss_codegen::import::mesh_path(src_dir, dir, f, strip);
+            // A missing mesh is the generator's to report (if a geom needs it); one beyond the
+            // generator's bound cannot be in a robot (the generator refuses it).
+            let fits =
+                fs::metadata(&p).is_ok_and(|m| m.len() <= rbss_codegen::import::MAX_BYTES as u64);
+            if let Some(b) = fits.then(|| fs::read(&p).ok()).flatten() {
+                self.meshes.push((p, b));
+            }
+        }
     }
 
     /// The hash of every file's path and bytes.
@@ -331,6 +374,10 @@ impl Inputs {
         part("model path", self.path.to_string_lossy().as_bytes());
         for (p, b) in &self.files {
             part("file", p.to_string_lossy().as_bytes());
+            part("bytes", b);
+        }
+        for (p, b) in &self.meshes {
+            part("mesh", p.to_string_lossy().as_bytes());
             part("bytes", b);
         }
         h.finalize().into()
@@ -353,9 +400,18 @@ impl Inputs {
     }
 }
 
-/// The `file` of every `<include>` element of an XML text, in document order (comments,
-/// CDATA sections, processing instructions and declarations skipped; entities decoded).
+/// The `file` of every `<include>` element of an XML text, in document order.
 fn xml_includes(text: &str) -> Vec<String> {
+    xml_tags(text, &["include"], &["file"])
+        .into_iter()
+        .filter_map(|(_, attrs)| attrs.into_iter().next().map(|(_, v)| v))
+        .collect()
+}
+
+/// The elements of an XML text named one of `tags` (local names), each with its attributes
+/// named one of `attrs`, in document order (comments, CDATA sections, processing instructions
+/// and declarations skipped; entities decoded).
+fn xml_tags(text: &str, tags: &[&str], attrs: &[&str]) -> Vec<(String, Vec<(String, String)>)> {
     let mut out = Vec::new();
     let mut i = 0;
     while let Some(off) = text[i..].find('<') {
@@ -385,7 +441,7 @@ fn xml_includes(text: &str) -> Vec<String> {
         // The attributes, up to the tag's `>` (outside quotes).
         let mut j = name_end;
         let bytes = rest.as_bytes();
-        let mut file = None;
+        let mut found: Vec<(String, String)> = Vec::new();
         while j < rest.len() {
             let c = bytes[j];
             if c == b'>' {
@@ -414,15 +470,13 @@ fn xml_includes(text: &str) -> Vec<String> {
                 break;
             };
             let value = &rest[k + 1..k + 1 + len];
-            if attr == "file" {
-                file = Some(xml_unescape(value));
+            if attrs.contains(&attr) {
+                found.push((attr.to_string(), xml_unescape(value)));
             }
             j = k + 1 + len + 1;
         }
-        if local == "include"
-            && let Some(f) = file
-        {
-            out.push(f);
+        if tags.contains(&local) {
+            out.push((local.to_string(), found));
         }
         i = s + j.max(1);
     }
@@ -1482,5 +1536,53 @@ pub(crate) fn age_text(s: u64) -> String {
         120..7200 => format!("{} min", s / 60),
         7200..172_800 => format!("{} h", s / 3600),
         _ => format!("{} d", s / 86_400),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A mesh file the MJCF source names (in an included file, under `<compiler meshdir>`) is in
+    /// the key: editing it changes the key; the generator's hashes (the model's, the source's
+    /// with its includes) do not cover it and stay.
+    #[test]
+    fn mesh_files_are_in_the_key() {
+        let tmp = tempfile::tempdir().unwrap();
+        let d = tmp.path();
+        std::fs::create_dir_all(d.join("parts")).unwrap();
+        std::fs::write(d.join("robot.toml"), "mjcf = \"robot.xml\"\n").unwrap();
+        std::fs::write(
+            d.join("robot.xml"),
+            "<mujoco><compiler meshdir=\"parts\"/><include file=\"assets.xml\"/>\
+             <worldbody/></mujoco>",
+        )
+        .unwrap();
+        std::fs::write(
+            d.join("assets.xml"),
+            "<mujoco><asset><!-- <mesh file=\"commented.obj\"/> -->\
+             <mesh name=\"m\" file=\"a.obj\"/></asset></mujoco>",
+        )
+        .unwrap();
+        let obj = d.join("parts/a.obj");
+        std::fs::write(&obj, "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\n").unwrap();
+        let read = || Inputs::read(&d.join("robot.toml")).unwrap();
+        let first = read();
+        assert_eq!(first.meshes.len(), 1, "{:?}", first.meshes);
+        assert_eq!(
+            first.meshes[0].0,
+            d.canonicalize().unwrap().join("parts/a.obj")
+        );
+        std::fs::write(&obj, "v 0 0 0\nv 2 0 0\nv 0 1 0\nv 0 0 1\n").unwrap();
+        let second = read();
+        assert_ne!(
+            first.hash(),
+            second.hash(),
+            "an edited mesh must change the key"
+        );
+        assert_eq!(first.generator_hashes(), second.generator_hashes());
+        // A mesh file that is missing is not in the key (the generator reports it if used).
+        std::fs::remove_file(&obj).unwrap();
+        assert!(read().meshes.is_empty());
     }
 }

@@ -9,7 +9,9 @@
 //! | joint `stiffness`, `springref`, `damping`, `armature` | `stiffness`, `rest`, `damping`, `armature` |
 //! | joint `ref` (hinge, slide) | the steps move by `q - ref` and the coordinate's home is `ref` (MuJoCo's `qpos0`: the body as written) |
 //! | `<inertial pos quat mass diaginertia\|fullinertia>` | `mass`, `com`, `inertia` (in the body's axes) |
-//! | `<geom>` (no `<inertial>`, `<compiler inertiafromgeom>`) | the mass and inertia of the body's spheres, capsules, cylinders, boxes, ellipsoids (`density` 1000 or `mass`), as MuJoCo's compiler computes them |
+//! | `<geom>` (no `<inertial>`, `<compiler inertiafromgeom>`) | the mass and inertia of the body's spheres, capsules, cylinders, boxes, ellipsoids, meshes and height fields (`density` 1000 or `mass`), as MuJoCo's compiler computes them |
+//! | `<asset><mesh file\|vertex face scale refpos refquat inertia>`, `<compiler meshdir assetdir strippath>` | a mesh geom's volume, centre of mass and inertia ([`super::mesh`]: STL, OBJ; `legacy` by default, `exact`, `convex`, `shell`) in its file's frame, put where the geom is |
+//! | `<asset><hfield size>` | a height field geom's box (half sizes `x`, `y`, `elevation / 4 + base / 2`), as MuJoCo's |
 //! | `<default class>`, `class`, `childclass` | attribute defaults of joints, geoms and actuators |
 //! | `<equality><connect>` | a `ball` loop (`site1`/`site2`, or `body1`, `body2`, `anchor` with body2's point found at `qpos0`) |
 //! | `<equality><weld>` | a `weld` loop (`relpose`, or the relative pose at `qpos0`) |
@@ -20,12 +22,14 @@
 //! | `<option gravity>` | `gravity` |
 //! | `<include file>` | the included file's elements in its place (each file once) |
 
+use std::cell::RefCell;
 use std::collections::HashMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use roxmltree::{Document, Node};
 
 use super::geom::{self, Mat};
+use super::mesh;
 use super::xml::{Cx, child, children};
 use super::{
     BodyOut, Coord, Imported, LoopOut, fnum, ident, joint_steps, number, pose_step, quote, unit,
@@ -69,6 +73,17 @@ struct Ctx<'a, 'i> {
     bodies_seen: usize,
     /// `<include file>` -> the included file's root.
     includes: Vec<(&'a str, Node<'a, 'i>)>,
+    /// The source's directory (mesh files are relative to it and `meshdir`).
+    dir: PathBuf,
+    /// `<compiler meshdir>` (else `assetdir`), `strippath`.
+    meshdir: Option<String>,
+    assetdir: Option<String>,
+    strippath: bool,
+    /// `<asset><mesh>` and `<hfield>` by name.
+    meshes: HashMap<String, Node<'a, 'i>>,
+    hfields: HashMap<String, Node<'a, 'i>>,
+    /// A mesh's mass properties once read (`None`: its error reported).
+    mesh_props: RefCell<HashMap<String, Option<mesh::MassProps>>>,
 }
 
 /// The files `<include>`d by the source and by them (`file` relative to the source's directory,
@@ -175,6 +190,7 @@ pub(super) fn import<'a, 'i>(
     cx: &mut Cx<'_>,
     doc: &'a Document<'i>,
     includes: &[(&'a str, Node<'a, 'i>)],
+    dir: &Path,
 ) -> Option<Imported> {
     let root = doc.root_element();
     if root.tag_name().name() != "mujoco" {
@@ -200,6 +216,13 @@ pub(super) fn import<'a, 'i>(
         tendons: HashMap::new(),
         bodies_seen: 0,
         includes: includes.to_vec(),
+        dir: dir.to_path_buf(),
+        meshdir: None,
+        assetdir: None,
+        strippath: false,
+        meshes: HashMap::new(),
+        hfields: HashMap::new(),
+        mesh_props: RefCell::new(HashMap::new()),
     };
     let mut out = Imported {
         name: ident(&root.attribute("model").unwrap_or("robot").to_lowercase()),
@@ -221,6 +244,29 @@ pub(super) fn import<'a, 'i>(
     }
     for d in kids_named(&ctx, root, "default") {
         collect_defaults(cx, d, None, &mut ctx);
+    }
+    for a in kids_named(&ctx, root, "asset") {
+        for m in kids(&ctx, a) {
+            let tag = m.tag_name().name();
+            if tag != "mesh" && tag != "hfield" {
+                continue;
+            }
+            // A mesh without a name is named by its file (no directory, no extension).
+            let name = m.attribute("name").map(str::to_string).or_else(|| {
+                m.attribute("file").map(|f| {
+                    let base = f.rsplit(['/', '\\']).next().unwrap_or(f);
+                    base.rsplit_once('.').map_or(base, |(b, _)| b).to_string()
+                })
+            });
+            if let Some(name) = name {
+                let map = if tag == "mesh" {
+                    &mut ctx.meshes
+                } else {
+                    &mut ctx.hfields
+                };
+                map.insert(name, m);
+            }
+        }
     }
     for w in kids_named(&ctx, root, "worldbody") {
         for b in kids_named(&ctx, w, "body") {
@@ -343,6 +389,15 @@ fn compiler(cx: &mut Cx<'_>, c: Node<'_, '_>, ctx: &mut Ctx<'_, '_>) {
             "",
             "",
         ),
+    }
+    if let Some(d) = c.attribute("meshdir") {
+        ctx.meshdir = Some(d.to_string());
+    }
+    if let Some(d) = c.attribute("assetdir") {
+        ctx.assetdir = Some(d.to_string());
+    }
+    if let Some(v) = c.attribute("strippath") {
+        ctx.strippath = v == "true";
     }
     if c.attribute("coordinate").is_some_and(|v| v != "local") {
         cx.error(
@@ -992,6 +1047,41 @@ fn from_geoms(
             None => [0.0; 3],
         };
         let mut r = orientation(cx, ctx, g).map_or(WORLD.r, |o| o.r);
+        if kind != "mesh" && g.attribute("mesh").is_some() {
+            cx.error(
+                &cx.attr_range(g, "mesh"),
+                format!("the inertia of a `{kind}` geom fitted to a mesh is not computed"),
+                "",
+                "write `type=\"mesh\"` (the mesh's own inertia) or give the body an `<inertial>`",
+            );
+            continue;
+        }
+        if kind == "mesh" {
+            // The mesh's mass properties in its file's (scaled) frame, put where the geom is:
+            // the same body inertia as MuJoCo's, which moves the mesh to its centre of mass
+            // and principal axes and the geom frame with it.
+            let Some(p) = geom_mesh(cx, ctx, g, class) else {
+                continue;
+            };
+            let m = geom_mass(cx, ctx, g, class, p.volume);
+            let c = geom::apply(&r, p.com);
+            let scaled = p.inertia.map(|row| row.map(|x| x * m / p.volume));
+            parts.push((
+                m,
+                [pos[0] + c[0], pos[1] + c[1], pos[2] + c[2]],
+                geom::rotate_inertia(&r, &scaled),
+            ));
+            continue;
+        }
+        let mut size = size;
+        if kind == "hfield" {
+            // MuJoCo's compiler gives a height field the inertia of a box of half sizes
+            // (x, y, elevation / 4 + base / 2), its `<hfield size>`'s, at the geom.
+            let Some(h) = hfield_size(cx, ctx, g, class) else {
+                continue;
+            };
+            size = vec![h[0], h[1], 0.25 * h[2] + 0.5 * h[3]];
+        }
         let need = match kind {
             "sphere" => 1,
             "capsule" | "cylinder" => {
@@ -1001,7 +1091,7 @@ fn from_geoms(
                     2
                 }
             }
-            "box" | "ellipsoid" => 3,
+            "box" | "ellipsoid" | "hfield" => 3,
             "plane" => continue,
             other => {
                 let n = get(cx, "type").unwrap_or(g);
@@ -1073,7 +1163,7 @@ fn from_geoms(
                 let ixx = (3.0 * rr * rr + h * h) / 12.0;
                 (pi * rr * rr * h, [ixx, ixx, rr * rr / 2.0])
             }
-            "box" => {
+            "box" | "hfield" => {
                 let [a, bb, c] = [s[0], s[1], s[2]];
                 (
                     8.0 * a * bb * c,
@@ -1096,15 +1186,7 @@ fn from_geoms(
                 )
             }
         };
-        let m = match get(cx, "mass") {
-            Some(n) => cx.number(n, "mass").map_or(0.0, |x| x.1),
-            None => {
-                let rho = get(cx, "density")
-                    .and_then(|n| cx.number(n, "density"))
-                    .map_or(1000.0, |x| x.1);
-                rho * volume
-            }
-        };
+        let m = geom_mass(cx, ctx, g, class, volume);
         let i = [
             [diag[0] * m, 0.0, 0.0],
             [0.0, diag[1] * m, 0.0],
@@ -1133,6 +1215,200 @@ fn from_geoms(
         c.map(fnum),
         geom::inertia_entries(&inertia).map(fnum),
     ))
+}
+
+/// A geom's mass: its `mass`, else its `density` (1000) times `volume`.
+fn geom_mass(
+    cx: &mut Cx<'_>,
+    ctx: &Ctx<'_, '_>,
+    g: Node<'_, '_>,
+    class: Option<&str>,
+    volume: f64,
+) -> f64 {
+    match lookup(cx, ctx, g, class, "mass") {
+        Some(n) => cx.number(n, "mass").map_or(0.0, |x| x.1),
+        None => {
+            let rho = lookup(cx, ctx, g, class, "density")
+                .and_then(|n| cx.number(n, "density"))
+                .map_or(1000.0, |x| x.1);
+            rho * volume
+        }
+    }
+}
+
+/// The `size` (4 numbers) of the `<hfield>` a geom names; `None` after an error.
+fn hfield_size(
+    cx: &mut Cx<'_>,
+    ctx: &Ctx<'_, '_>,
+    g: Node<'_, '_>,
+    class: Option<&str>,
+) -> Option<Vec<f64>> {
+    let at = lookup(cx, ctx, g, class, "hfield").unwrap_or(g);
+    let Some(name) = at.attribute("hfield") else {
+        cx.error(&cx.tag(g), "an `hfield` geom has no `hfield`", "", "");
+        return None;
+    };
+    let Some(h) = ctx.hfields.get(name).copied() else {
+        cx.error(
+            &cx.attr_range(at, "hfield"),
+            format!("no `<hfield>` named `{name}` in `<asset>`"),
+            "",
+            "",
+        );
+        return None;
+    };
+    cx.required(h, "size")?;
+    cx.numbers(h, "size", 4)
+        .map(|v| v.iter().map(|x| x.1).collect())
+}
+
+/// The mass properties (per unit density, in the mesh's frame) of the `<mesh>` a geom names,
+/// read once per mesh; `None` after an error (located at the geom's `mesh` or the
+/// `<mesh>`).
+fn geom_mesh(
+    cx: &mut Cx<'_>,
+    ctx: &Ctx<'_, '_>,
+    g: Node<'_, '_>,
+    class: Option<&str>,
+) -> Option<mesh::MassProps> {
+    let at = lookup(cx, ctx, g, class, "mesh").unwrap_or(g);
+    let Some(name) = at.attribute("mesh") else {
+        cx.error(&cx.tag(g), "a `mesh` geom has no `mesh`", "", "");
+        return None;
+    };
+    if let Some(p) = ctx.mesh_props.borrow().get(name) {
+        return *p;
+    }
+    let Some(m) = ctx.meshes.get(name).copied() else {
+        cx.error(
+            &cx.attr_range(at, "mesh"),
+            format!("no `<mesh>` named `{name}` in `<asset>`"),
+            "",
+            "",
+        );
+        return None;
+    };
+    let p = read_mesh(cx, ctx, m, name);
+    ctx.mesh_props.borrow_mut().insert(name.to_string(), p);
+    p
+}
+
+/// The path MuJoCo reads a mesh `file` from: as written when absolute, else in `meshdir`
+/// (else `assetdir`), itself relative to the source's directory unless absolute.
+pub fn mesh_path(dir: &Path, meshdir: Option<&str>, file: &str, strip: bool) -> PathBuf {
+    let file = if strip {
+        file.rsplit(['/', '\\']).next().unwrap_or(file)
+    } else {
+        file
+    };
+    let f = Path::new(file);
+    if f.is_absolute() {
+        return f.to_path_buf();
+    }
+    match meshdir.filter(|d| !d.is_empty()) {
+        Some(d) => dir.join(d).join(f),
+        None => dir.join(f),
+    }
+}
+
+fn read_mesh(
+    cx: &mut Cx<'_>,
+    ctx: &Ctx<'_, '_>,
+    m: Node<'_, '_>,
+    name: &str,
+) -> Option<mesh::MassProps> {
+    let class = m.attribute("class");
+    let get = |cx: &mut Cx<'_>, key: &str, n: usize| {
+        lookup(cx, ctx, m, class, key).and_then(|at| cx.numbers(at, key, n).map(|v| (at, v)))
+    };
+    let scale = get(cx, "scale", 3).map_or([1.0; 3], |(_, v)| vec_of(&v));
+    let refpos = get(cx, "refpos", 3).map_or([0.0; 3], |(_, v)| vec_of(&v));
+    let refquat = get(cx, "refquat", 4).map_or([1.0, 0.0, 0.0, 0.0], |(_, v)| {
+        [v[0].1, v[1].1, v[2].1, v[3].1]
+    });
+    let vertex = get(cx, "vertex", 0);
+    let face = get(cx, "face", 0);
+    let mode_at = lookup(cx, ctx, m, class, "inertia");
+    let mode = match mode_at.and_then(|n| n.attribute("inertia")) {
+        None => mesh::Inertia::Legacy,
+        Some(k) => match mesh::Inertia::from_key(k) {
+            Some(i) => i,
+            None => {
+                let at = mode_at.unwrap_or(m);
+                cx.error(
+                    &cx.attr_range(at, "inertia"),
+                    format!("a mesh's `inertia` is convex, exact, legacy or shell, not `{k}`"),
+                    "",
+                    "",
+                );
+                return None;
+            }
+        },
+    };
+    let (mut data, at) = if let Some(file) = m.attribute("file") {
+        let meshdir = ctx.meshdir.as_deref().or(ctx.assetdir.as_deref());
+        let path = mesh_path(&ctx.dir, meshdir, file, ctx.strippath);
+        let shown = path.display().to_string().replace('\\', "/");
+        match mesh::read_file(&path) {
+            Ok(d) => (d, Some((m, "file", shown))),
+            Err(e) => {
+                cx.error(
+                    &cx.attr_range(m, "file"),
+                    format!("mesh `{name}`: `{shown}`: {e}"),
+                    "relative to the source's directory and `<compiler meshdir>`",
+                    "",
+                );
+                return None;
+            }
+        }
+    } else if let Some((_, v)) = vertex {
+        let f: Vec<f64> = face
+            .map(|(_, f)| f.iter().map(|x| x.1).collect())
+            .unwrap_or_default();
+        let n = v.len() / 3;
+        if !v.len().is_multiple_of(3)
+            || n < 4
+            || !f.len().is_multiple_of(3)
+            || f.iter()
+                .any(|&i| i < 0.0 || i.fract() != 0.0 || i >= n as f64)
+        {
+            cx.error(
+                &cx.tag(m),
+                format!("mesh `{name}`: `vertex` is 3 numbers a vertex (at least 4), `face` 3 vertex indices a triangle"),
+                "",
+                "",
+            );
+            return None;
+        }
+        let verts = v
+            .chunks(3)
+            .map(|c| [c[0].1, c[1].1, c[2].1].map(|x| x as f32 as f64))
+            .collect();
+        let faces = f
+            .chunks(3)
+            .map(|c| [c[0] as usize, c[1] as usize, c[2] as usize])
+            .collect();
+        (mesh::Mesh { verts, faces }, None)
+    } else {
+        cx.error(
+            &cx.tag(m),
+            format!("mesh `{name}` has no `file` and no `vertex`"),
+            "",
+            "the inertia of builtin and plugin meshes is not computed: give the body an `<inertial>`",
+        );
+        return None;
+    };
+    mesh::transform(&mut data, refpos, refquat, scale);
+    match mesh::mass_properties(&data, mode) {
+        Ok(p) => Some(p),
+        Err(e) => {
+            let what = at
+                .as_ref()
+                .map_or(String::new(), |(_, _, s)| format!(" (`{s}`)"));
+            cx.error(&cx.tag(m), format!("mesh `{name}`{what}: {e}"), "", "");
+            None
+        }
+    }
 }
 
 /// An attachment `{ body = "...", transforms = [...] }` at `p` (and `r`) in `body`.

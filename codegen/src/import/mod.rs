@@ -19,10 +19,13 @@ pub use crate::model::SourceFile;
 
 pub(crate) mod geom;
 pub mod merge;
+mod mesh;
 mod mjcf;
 mod sdf;
 mod urdf;
 mod xml;
+
+pub use mjcf::mesh_path;
 
 /// The source formats.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -230,7 +233,12 @@ pub fn import_renamed(
                 .zip(&docs)
                 .map(|((key, _, _), d)| (key.as_str(), d.root_element()))
                 .collect();
-            mjcf::import(&mut cx, &doc, &roots)
+            mjcf::import(
+                &mut cx,
+                &doc,
+                &roots,
+                path.parent().unwrap_or(Path::new("")),
+            )
         }
         Format::Sdf => sdf::import(&mut cx, &doc),
     };
