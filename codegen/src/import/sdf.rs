@@ -5,9 +5,12 @@
 //! | `<link>` with `<pose relative_to>` (the model's frame by default) | a `[[body]]`: its pose relative to its parent link, `inverse(parent's pose) * its pose`, folded at generation |
 //! | `<joint type="revolute\|continuous\|prismatic">` that brings a link into the tree | a coordinate: the child's steps go to the joint's frame (`<pose>`, the child's frame by default), move about `<axis><xyz>`, and back |
 //! | `<joint type="ball">` in the tree | three coordinates `NAME_x`, `NAME_y`, `NAME_z` (`Rx Ry Rz` about the joint's origin) |
+//! | `<joint type="universal\|revolute2">` in the tree | two coordinates `NAME_1`, `NAME_2`: the turn about `<axis>`, then about `<axis2>` as turned by the first (SDFormat: "two revolute joints connected in series", both axes in the joint's frame), i.e. `J R(axis, q1) R(axis2, q2) J⁻¹`; parallel axes refused |
+//! | `<joint type="screw">` in the tree | one coordinate, the angle `q` about `<axis>`, and the translation along it: `<screw_thread_pitch>` p (m per revolution, right-handed positive) `p q / (2 pi)`, else the deprecated `<thread_pitch>` t (rad/m, left-handed positive) `-q / t` ([`screw_lead`]) |
+//! | `<axis><xyz expressed_in>`, `<axis2>` | the vector turned from the named frame into the joint's |
 //! | `<joint type="fixed">` in the tree | the child's steps only |
 //! | a joint whose child is already in the tree | a loop at the joint's frame: `ball` (ball), `hinge` (revolute, about the axis), `weld` (fixed) |
-//! | a `prismatic` joint whose child is already in the tree | the prismatic joint brings the child in (a coordinate), and the joint that brought it in closes the loop instead (as above); refused when that joint is prismatic too, or when the loop hangs below the child (a note says which joint closes) |
+//! | a `prismatic`, `universal`, `revolute2` or `screw` joint whose child is already in the tree (no loop kind is such a joint) | it brings the child in (its coordinates), and the joint that brought it in closes the loop instead (as above); refused when that joint is not revolute, ball or fixed, or when the loop hangs below the child (a note says which joint closes) |
 //! | `<joint type="gearbox">` (`<gearbox_ratio>` r, `<gearbox_reference_body>` R, `<axis>`, `<axis2>`) | a `coupling` loop named after the joint: SDFormat's `theta_2 = -r theta_1`, `theta_1` the parent link's angle against R about `<axis>`, `theta_2` the child's about `<axis2>`, i.e. `q2 = -r s1 s2 q1` between the revolute joints of the tree that join parent and child to R (`s = ±1`: the joint's axis along or against the gearbox's, the joint from R to the link or back); `q2` is not actuated |
 //! | `<frame>` | a frame `relative_to` may name |
 //! | `<inertial>` (`<pose>`, `<mass>`, `<inertia>`) | `mass`, `com`, `inertia` (in the link's axes) |
@@ -16,9 +19,9 @@
 //!
 //! | a `<link>` that is the child of no joint (the model's root: a floating base) | a free joint `LINK_free`: 7 coordinates `LINK_free_x`, `_y`, `_z`, `LINK_free_qw`, `_qx`, `_qy`, `_qz` that move the link from its pose as written (home: zero and `(1, 0, 0, 0)`) |
 //!
-//! Refused: `universal`, `revolute2` and `screw` joints; a prismatic joint closing a loop that
-//! no other joint of it can close; a gearbox whose links are not turned against its reference
-//! body by revolute joints of the tree about its axes.
+//! Refused: a prismatic, universal, revolute2 or screw joint closing a loop that no other joint
+//! of it can close; a gearbox whose links are not turned against its reference body by revolute
+//! joints of the tree about its axes; nested and included models.
 
 use std::collections::HashMap;
 
@@ -48,6 +51,10 @@ fn origin_abs() -> Abs {
         r: IDENTITY,
     }
 }
+
+/// Joints no loop kind expresses: one that closes a loop brings its child into the tree instead,
+/// and the joint that brought the child in closes the loop ([`tree`]).
+const CUT_ELSEWHERE: [&str; 4] = ["prismatic", "universal", "revolute2", "screw"];
 
 struct Frames<'a, 'i> {
     /// name -> (element, kind: "link", "joint" or "frame").
@@ -299,13 +306,15 @@ fn tree<'a, 'i>(
         }
     }
 
-    // A prismatic joint closing a loop takes the place of the joint that brought its child in,
-    // which closes the loop instead (a hinge, ball or weld loop).
+    // A joint no loop kind expresses (prismatic, universal, revolute2, screw) closing a loop
+    // takes the place of the joint that brought its child in, which closes the loop instead (a
+    // hinge, ball or weld loop).
     let mut swapped = false;
     let mut refused = Vec::new();
     for slot in closing.iter_mut() {
         let j = *slot;
-        if j.attribute("type") != Some("prismatic") {
+        let kind = j.attribute("type").unwrap_or("");
+        if !CUT_ELSEWHERE.contains(&kind) {
             continue;
         }
         let (p, c) = ends(j);
@@ -330,12 +339,12 @@ fn tree<'a, 'i>(
             cx.error(
                 &cx.attr_range(j, "type"),
                 format!(
-                    "prismatic joint `{jname}` closes a loop that hangs below its own child `{c}`"
+                    "{kind} joint `{jname}` closes a loop that hangs below its own child `{c}`"
                 ),
                 "only this joint can close the loop",
                 &format!(
-                    "the model language has no prismatic loop: a loop through a prismatic joint is \
-                     imported with the prismatic joint as a coordinate and the loop closed at the \
+                    "the model language has no {kind} loop: a loop through a {kind} joint is \
+                     imported with the {kind} joint in the tree and the loop closed at the \
                      joint that brings the same link in; here `{p}` is reached through `{c}`, so \
                      `{c}` cannot be brought in by `{jname}`"
                 ),
@@ -347,12 +356,12 @@ fn tree<'a, 'i>(
             cx.error(
                 &cx.attr_range(j, "type"),
                 format!(
-                    "prismatic joint `{jname}` closes a loop whose other joint at `{c}`, \
+                    "{kind} joint `{jname}` closes a loop whose other joint at `{c}`, \
                      `{tname}`, is a `{t_kind}` joint"
                 ),
                 "cannot close the loop",
                 &format!(
-                    "the model language has no prismatic loop: the loop is closed at the joint \
+                    "the model language has no {kind} loop: the loop is closed at the joint \
                      that brings `{c}` into the tree, which must be a revolute, ball or fixed \
                      joint (a hinge, ball or weld loop)"
                 ),
@@ -365,8 +374,8 @@ fn tree<'a, 'i>(
         swapped = true;
         let (jn, tn) = (cx.joint_name(jname), cx.joint_name(tname));
         out.notes.push(format!(
-            "prismatic joint `{jn}` closes a loop: it is a coordinate, and the loop closes at \
-             joint `{tn}` instead"
+            "{kind} joint `{jn}` closes a loop: it brings `{c}` into the tree, and the loop \
+             closes at joint `{tn}` instead"
         ));
     }
     // Reported once, here: not again as a joint that cannot close a loop.
@@ -437,7 +446,8 @@ fn bodies<'a, 'i>(
         };
         match kind {
             "fixed" => {}
-            "revolute" | "continuous" | "prismatic" | "ball" => {
+            "revolute" | "continuous" | "prismatic" | "ball" | "universal" | "revolute2"
+            | "screw" => {
                 transforms.extend(jpose.clone());
                 let mut coord = Coord {
                     name: jname.clone(),
@@ -445,39 +455,97 @@ fn bodies<'a, 'i>(
                     origin: cx.origin(j),
                     ..Coord::default()
                 };
-                dynamics(cx, j, &mut coord);
-                if kind == "ball" {
-                    let names: Vec<String> = ["x", "y", "z"]
-                        .iter()
-                        .map(|a| format!("{jname}_{a}"))
-                        .collect();
-                    transforms.push(format!(
-                        "{{ spherical = [{}] }}",
-                        names
+                dynamics(cx, j, "axis", &mut coord);
+                match kind {
+                    "ball" => {
+                        let names: Vec<String> = ["x", "y", "z"]
                             .iter()
-                            .map(|n| quote(n))
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    ));
-                    for n in &names {
-                        let mut cc = coord.clone();
-                        cc.name = n.clone();
-                        out.coordinates.push(cc);
+                            .map(|a| format!("{jname}_{a}"))
+                            .collect();
+                        transforms.push(format!(
+                            "{{ spherical = [{}] }}",
+                            names
+                                .iter()
+                                .map(|n| quote(n))
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ));
+                        for n in &names {
+                            let mut cc = coord.clone();
+                            cc.name = n.clone();
+                            out.coordinates.push(cc);
+                        }
+                        out.notes.push(format!(
+                            "ball joint `{jname}` is three coordinates {}: angles Rx Ry Rz",
+                            names.join(", ")
+                        ));
                     }
-                    out.notes.push(format!(
-                        "ball joint `{jname}` is three coordinates {}: angles Rx Ry Rz",
-                        names.join(", ")
-                    ));
-                } else {
-                    let Some(axis) = axis_of(cx, j) else { continue };
-                    let k = if kind == "prismatic" {
-                        "prismatic"
-                    } else {
-                        "revolute"
-                    };
-                    transforms.extend(joint_steps(k, &jname, axis));
-                    out.actuated.push(jname.clone());
-                    out.coordinates.push(coord);
+                    "universal" | "revolute2" => {
+                        let (a1, a2) = (
+                            axis_in(cx, frames, j, "axis"),
+                            axis_in(cx, frames, j, "axis2"),
+                        );
+                        let (Some(a1), Some(a2)) = (a1, a2) else {
+                            continue;
+                        };
+                        if (geom::dot(a1, a2).abs() - 1.0).abs() < 1e-9 {
+                            let x = child(j, "axis2").and_then(|a| child(a, "xyz")).unwrap_or(j);
+                            cx.error(
+                                &x.first_child().map_or_else(|| cx.tag(x), |c| c.range()),
+                                format!(
+                                    "the two axes of {kind} joint `{}` are parallel",
+                                    j.attribute("name").unwrap_or("")
+                                ),
+                                "along `<axis>` (either sign)",
+                                "the joint would turn twice about one line, one coordinate \
+                                 too many: a revolute joint turns about one axis",
+                            );
+                            continue;
+                        }
+                        let names = [format!("{jname}_1"), format!("{jname}_2")];
+                        transforms.extend(joint_steps("revolute", &names[0], a1));
+                        transforms.extend(joint_steps("revolute", &names[1], a2));
+                        let mut second = coord.clone();
+                        dynamics(cx, j, "axis2", &mut second);
+                        coord.name = names[0].clone();
+                        second.name = names[1].clone();
+                        out.notes.push(format!(
+                            "{kind} joint `{jname}` is two coordinates {}, {}: the angle about \
+                             `<axis>`, then about `<axis2>` (which turns with the first)",
+                            names[0], names[1]
+                        ));
+                        out.actuated.extend(names.iter().cloned());
+                        out.coordinates.push(coord);
+                        out.coordinates.push(second);
+                    }
+                    "screw" => {
+                        let Some(axis) = axis_of(cx, frames, j) else {
+                            continue;
+                        };
+                        let Some(lead) = screw_lead(cx, j, &jname) else {
+                            continue;
+                        };
+                        transforms.extend(screw_steps(&jname, &lead, axis));
+                        out.notes.push(format!(
+                            "screw joint `{jname}` is one coordinate: the angle about `<axis>`, \
+                             with the translation {lead} along it"
+                        ));
+                        out.actuated.push(jname.clone());
+                        out.coordinates.push(coord);
+                    }
+                    _ => {
+                        let Some(axis) = axis_of(cx, frames, j) else {
+                            continue;
+                        };
+                        let k = if kind == "prismatic" {
+                            "prismatic"
+                        } else {
+                            "revolute"
+                        };
+                        transforms.extend(joint_steps(k, &jname, axis));
+                        out.actuated.push(jname.clone());
+                        out.coordinates.push(coord);
+                    }
                 }
                 if !jpose.is_empty() {
                     transforms.push(format!("{{ inverse = [{}] }}", jpose.join(", ")));
@@ -488,7 +556,8 @@ fn bodies<'a, 'i>(
                     &cx.attr_range(j, "type"),
                     format!("a `{other}` joint cannot be imported"),
                     "not supported",
-                    "revolute, continuous, prismatic, ball and fixed joints are",
+                    "revolute, continuous, prismatic, ball, universal, revolute2, screw and \
+                     fixed joints are",
                 );
                 continue;
             }
@@ -544,7 +613,7 @@ fn loops<'a, 'i>(
         };
         // The axis is checked even where a pose failed (reported already).
         let axis = match kind {
-            "hinge" => match axis_of(cx, j) {
+            "hinge" => match axis_of(cx, frames, j) {
                 Some(a) => Some(a),
                 None => continue,
             },
@@ -699,10 +768,12 @@ fn gearboxes<'a, 'i>(
                 );
                 continue;
             };
-            let Some(u) = axis_in(cx, g, tag) else {
+            let Some(u) = axis_in(cx, frames, g, tag) else {
                 continue;
             };
-            let Some(w) = axis_of(cx, t) else { continue };
+            let Some(w) = axis_of(cx, frames, t) else {
+                continue;
+            };
             let tname = t.attribute("name").unwrap_or("");
             let (Some(ga), Some(ta)) = (gabs.clone(), abs_of(cx, frames, tname)) else {
                 continue;
@@ -759,6 +830,75 @@ fn gearboxes<'a, 'i>(
             ],
             origin: cx.origin(g),
         });
+    }
+}
+
+/// A screw joint's translation along its axis as an expression of its angle `q` (rad), from
+/// SDFormat's `joint.sdf` (1.10 and later): `<screw_thread_pitch>` p is "the axial distance
+/// traveled for each revolution of the joint, with units of meters / revolution with a positive
+/// value corresponding to a right-handed thread", so the translation is `p q / (2 pi)`; the
+/// deprecated `<thread_pitch>` t, "interpreted by gazebo-classic as having units of radians /
+/// meter with a positive value corresponding to a left-handed thread", gives `-q / t`.
+/// `<screw_thread_pitch>` "supersedes" `<thread_pitch>` when both are given; with neither, the
+/// spec's default `<screw_thread_pitch>` 1 applies, with a warning.
+fn screw_lead(cx: &mut Cx<'_>, j: Node<'_, '_>, q: &str) -> Option<String> {
+    if let Some(n) = child(j, "screw_thread_pitch") {
+        let v = cx.text_numbers(n, 1)?;
+        return Some(format!("{} / (2 * pi) * {q}", number(&v[0].0, v[0].1)));
+    }
+    if let Some(n) = child(j, "thread_pitch") {
+        let v = cx.text_numbers(n, 1)?;
+        if v[0].1 == 0.0 {
+            cx.error(
+                &n.first_child().map_or_else(|| cx.tag(n), |c| c.range()),
+                format!(
+                    "screw joint `{}` has thread_pitch 0",
+                    j.attribute("name").unwrap_or("")
+                ),
+                "radians per metre: an infinite lead",
+                "`<thread_pitch>` is rad/m (positive: a left-handed thread); \
+                 `<screw_thread_pitch>` (SDF 1.10) is m per revolution",
+            );
+            return None;
+        }
+        return Some(format!("-{q} / ({})", number(&v[0].0, v[0].1)));
+    }
+    cx.warn(
+        &cx.attr_range(j, "type"),
+        "the screw joint has no `<screw_thread_pitch>` or `<thread_pitch>`",
+        "1 m per revolution",
+        "SDFormat's default `<screw_thread_pitch>` is 1 (m per revolution, right-handed)",
+    );
+    Some(format!("1 / (2 * pi) * {q}"))
+}
+
+/// A screw joint's steps: the rotation about the unit `axis` by `q` and the translation `lead`
+/// (an expression of `q`) along it; about a coordinate axis directly, else in a frame whose z
+/// is the axis (turned onto it before and back after), as a revolute joint's.
+fn screw_steps(q: &str, lead: &str, axis: [f64; 3]) -> Vec<String> {
+    match geom::coordinate_axis(axis) {
+        Some((k, s)) => {
+            let a = ["x", "y", "z"][k];
+            let mut steps = joint_steps("revolute", q, axis);
+            steps.push(quote(&if s > 0.0 {
+                format!("T{a}({lead})")
+            } else {
+                format!("T{a}(-({lead}))")
+            }));
+            steps
+        }
+        None => {
+            let aa = format!(
+                "{{ axis_angle = [{}] }}",
+                geom::z_onto(axis).map(fnum).join(", ")
+            );
+            vec![
+                aa.clone(),
+                format!("{{ revolute = {} }}", quote(q)),
+                quote(&format!("Tz({lead})")),
+                format!("{{ inverse = [{aa}] }}"),
+            ]
+        }
     }
 }
 
@@ -924,12 +1064,22 @@ fn abs_of<'a, 'i>(cx: &mut Cx<'_>, f: &mut Frames<'a, 'i>, name: &str) -> Option
 }
 
 /// The unit axis of a joint, in the joint's frame.
-fn axis_of(cx: &mut Cx<'_>, j: Node<'_, '_>) -> Option<[f64; 3]> {
-    axis_in(cx, j, "axis")
+fn axis_of<'a, 'i>(cx: &mut Cx<'_>, f: &mut Frames<'a, 'i>, j: Node<'a, 'i>) -> Option<[f64; 3]> {
+    axis_in(cx, f, j, "axis")
 }
 
-/// The unit vector of a joint's `<axis>` or `<axis2>` (`tag`), in the joint's frame.
-fn axis_in(cx: &mut Cx<'_>, j: Node<'_, '_>, tag: &str) -> Option<[f64; 3]> {
+/// The unit vector of a joint's `<axis>` or `<axis2>` (`tag`), in the joint's frame. SDFormat's
+/// `joint.sdf`: the axis "is expressed in the joint frame unless a different frame is expressed
+/// in the expressed_in attribute"; a vector given in another frame (a link, joint or `<frame>`,
+/// `__model__`) is turned into the joint's axes with both frames as posed, every joint at zero.
+/// A component within 1e-12 of zero after the turn is zero (an axis along a coordinate axis
+/// stays one joint step).
+fn axis_in<'a, 'i>(
+    cx: &mut Cx<'_>,
+    f: &mut Frames<'a, 'i>,
+    j: Node<'a, 'i>,
+    tag: &str,
+) -> Option<[f64; 3]> {
     let Some(x) = child(j, tag).and_then(|a| child(a, "xyz")) else {
         cx.error(
             &cx.tag(j),
@@ -939,30 +1089,45 @@ fn axis_in(cx: &mut Cx<'_>, j: Node<'_, '_>, tag: &str) -> Option<[f64; 3]> {
         );
         return None;
     };
-    if x.attribute("expressed_in").is_some_and(|e| !e.is_empty()) {
+    let frame = x.attribute("expressed_in").filter(|e| !e.is_empty());
+    let jname = j.attribute("name").unwrap_or("");
+    if let Some(e) = frame
+        && e != "world"
+        && e != "__model__"
+        && !f.nodes.contains_key(e)
+    {
         cx.error(
             &cx.attr_range(x, "expressed_in"),
-            "an axis expressed in another frame is not supported",
-            "",
-            "give the axis in the joint's frame",
+            format!("unknown frame `{e}`"),
+            "no link, joint or frame of this name",
+            "the axis is expressed in the joint's frame unless `expressed_in` names another",
         );
         return None;
     }
     let v = cx.text_numbers(x, 3)?;
-    let a = unit([v[0].1, v[1].1, v[2].1]);
-    if a.is_none() {
+    let Some(a) = unit([v[0].1, v[1].1, v[2].1]) else {
         cx.error(
             &x.first_child().map_or_else(|| cx.tag(x), |c| c.range()),
             "the joint's axis is zero",
             "no direction",
             "",
         );
+        return None;
+    };
+    match frame {
+        Some(e) if e != jname => {
+            let (ea, ja) = (abs_of(cx, f, e)?, abs_of(cx, f, jname)?);
+            let turned = geom::apply(&geom::mul(&geom::transpose(&ja.r), &ea.r), a);
+            let snapped = turned.map(|c| if c.abs() < 1e-12 { 0.0 } else { c });
+            unit(snapped)
+        }
+        _ => Some(a),
     }
-    a
 }
 
-fn dynamics(cx: &mut Cx<'_>, j: Node<'_, '_>, c: &mut Coord) {
-    let Some(d) = child(j, "axis").and_then(|a| child(a, "dynamics")) else {
+/// The `<dynamics>` of a joint's `<axis>` or `<axis2>` (`tag`) as the coordinate's keys.
+fn dynamics(cx: &mut Cx<'_>, j: Node<'_, '_>, tag: &str, c: &mut Coord) {
+    let Some(d) = child(j, tag).and_then(|a| child(a, "dynamics")) else {
         return;
     };
     let scalar = |cx: &mut Cx<'_>, tag: &str| {
