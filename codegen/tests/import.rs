@@ -1238,3 +1238,94 @@ fn sdf_universal_joint_closing_a_loop_is_in_the_tree() {
     println!("universal loop: f against the oracle, worst {worst:e}");
     assert!(worst < 1e-15, "worst {worst:e}");
 }
+
+/// `[[f64; 3]; 3]` and a position: a rigid transform, `a * b`.
+fn compose(
+    a: &([f64; 3], [[f64; 3]; 3]),
+    b: &([f64; 3], [[f64; 3]; 3]),
+) -> ([f64; 3], [[f64; 3]; 3]) {
+    let d = mat_vec(&a.1, b.0);
+    (
+        [a.0[0] + d[0], a.0[1] + d[1], a.0[2] + d[2]],
+        mat_mul(&a.1, &b.1),
+    )
+}
+
+/// Nested models (SDFormat 1.8): a `<model>` inside the model is a scope, its links and joints
+/// named `arm::upper` from outside it (bodies `arm__upper`, coordinates `arm__elbow`) and
+/// `upper` inside it; its `<pose>` is relative to the model around it (or `relative_to` a frame
+/// of that scope), and `__model__` inside it is its own frame. Two levels here: `arm` in the
+/// robot, `hand` in `arm`, placed relative to `lower` (a name of arm's scope), the palm relative
+/// to hand's `__model__`; a joint of the outer model reaches `arm::upper`, one of `arm` reaches
+/// `hand::palm`. Every link's world frame is the product of the poses, computed here, at zero
+/// and with the joints turned.
+#[test]
+fn sdf_nested_models_are_scopes() {
+    use rbss_codegen::import::{Format, import_file};
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let inertial = "<inertial><mass>1</mass><inertia><ixx>0.01</ixx><iyy>0.01</iyy>\
+                    <izz>0.01</izz></inertia></inertial>";
+    std::fs::write(
+        d.join("nested.sdf"),
+        format!(
+            "<sdf version=\"1.9\"><model name=\"robot\">\
+             <link name=\"base\">{inertial}</link>\
+             <joint name=\"fix\" type=\"fixed\"><parent>world</parent><child>base</child></joint>\
+             <model name=\"arm\"><pose>0.1 0 0.2 0 0 0.5</pose>\
+               <link name=\"upper\"><pose>0 0 0.1 0 0 0</pose>{inertial}</link>\
+               <link name=\"lower\"><pose relative_to=\"upper\">0.3 0 0 0 0 0</pose>{inertial}</link>\
+               <joint name=\"elbow\" type=\"revolute\"><parent>upper</parent><child>lower</child>\
+               <axis><xyz>0 1 0</xyz></axis></joint>\
+               <model name=\"hand\"><pose relative_to=\"lower\">0.2 0 0 0.4 0 0</pose>\
+                 <link name=\"palm\"><pose relative_to=\"__model__\">0 0.05 0 0 0 0</pose>{inertial}</link>\
+               </model>\
+               <joint name=\"wrist\" type=\"revolute\"><parent>lower</parent><child>hand::palm</child>\
+               <axis><xyz expressed_in=\"__model__\">1 0 0</xyz></axis></joint>\
+             </model>\
+             <joint name=\"shoulder\" type=\"revolute\"><parent>base</parent><child>arm::upper</child>\
+             <axis><xyz>0 0 1</xyz></axis></joint>\
+             </model></sdf>"
+        ),
+    )
+    .unwrap();
+    let (imp, _) = import_file(&d.join("nested.sdf"), "nested.sdf", Format::Sdf)
+        .unwrap_or_else(|e| panic!("{}", e.render()));
+    let bodies: Vec<&str> = imp.bodies.iter().map(|b| b.name.as_str()).collect();
+    assert_eq!(
+        bodies,
+        ["base", "arm__upper", "arm__lower", "arm__hand__palm"]
+    );
+    let coords: Vec<&str> = imp.coordinates.iter().map(|c| c.name.as_str()).collect();
+    assert_eq!(coords, ["shoulder", "arm__elbow", "arm__wrist"]);
+    std::fs::write(d.join("m.toml"), "sdf = \"nested.sdf\"\n").unwrap();
+    let m = model_at(&d.join("m.toml"));
+    let (x, y, z) = ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]);
+    let t = |p: [f64; 3]| (p, rot(z, 0.0));
+    let mut worst = 0.0f64;
+    for (s, e, w) in [(0.0, 0.0, 0.0), (0.7, -1.1, 0.4), (-2.0, 0.5, 2.9)] {
+        let at = [("shoulder", s), ("arm__elbow", e), ("arm__wrist", w)];
+        let arm = ([0.1, 0.0, 0.2], rot(z, 0.5));
+        let upper = compose(&compose(&arm, &t([0.0, 0.0, 0.1])), &([0.0; 3], rot(z, s)));
+        let lower = compose(
+            &compose(&upper, &t([0.3, 0.0, 0.0])),
+            &([0.0; 3], rot(y, e)),
+        );
+        let hand = compose(&lower, &([0.2, 0.0, 0.0], rot(x, 0.4)));
+        // The wrist's axis: x of arm's frame, in the palm's axes at zero (hand turned 0.4
+        // about x of lower, lower's axes arm's): still x.
+        let palm = compose(
+            &compose(&hand, &t([0.0, 0.05, 0.0])),
+            &([0.0; 3], rot(x, w)),
+        );
+        for (name, want) in [
+            ("arm__upper", upper),
+            ("arm__lower", lower),
+            ("arm__hand__palm", palm),
+        ] {
+            worst = worst.max(frame_gap(&frame_at(&m, name, &at), &want));
+        }
+    }
+    println!("nested models: link frames against the oracle, worst {worst:e}");
+    assert!(worst < 1e-14, "worst {worst:e}");
+}

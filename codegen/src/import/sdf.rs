@@ -13,6 +13,7 @@
 //! | a `prismatic`, `universal`, `revolute2` or `screw` joint whose child is already in the tree (no loop kind is such a joint) | it brings the child in (its coordinates), and the joint that brought it in closes the loop instead (as above); refused when that joint is not revolute, ball or fixed, or when the loop hangs below the child (a note says which joint closes) |
 //! | `<joint type="gearbox">` (`<gearbox_ratio>` r, `<gearbox_reference_body>` R, `<axis>`, `<axis2>`) | a `coupling` loop named after the joint: SDFormat's `theta_2 = -r theta_1`, `theta_1` the parent link's angle against R about `<axis>`, `theta_2` the child's about `<axis2>`, i.e. `q2 = -r s1 s2 q1` between the revolute joints of the tree that join parent and child to R (`s = ±1`: the joint's axis along or against the gearbox's, the joint from R to the link or back); `q2` is not actuated |
 //! | `<frame>` | a frame `relative_to` may name |
+//! | a nested `<model>` (any depth) | its links, joints and frames, scoped: `inner::link` from outside, `link` inside, `__model__` its own frame ([`scope_of`], [`resolve`]); its `<pose>` relative to the model around it |
 //! | `<inertial>` (`<pose>`, `<mass>`, `<inertia>`) | `mass`, `com`, `inertia` (in the link's axes) |
 //! | `<axis><dynamics>` `damping`, `spring_stiffness`, `spring_reference` | `damping`, `stiffness`, `rest` (`friction` ignored, with a warning) |
 //! | `<world><gravity>` | `gravity` |
@@ -21,14 +22,14 @@
 //!
 //! Refused: a prismatic, universal, revolute2 or screw joint closing a loop that no other joint
 //! of it can close; a gearbox whose links are not turned against its reference body by revolute
-//! joints of the tree about its axes; nested and included models.
+//! joints of the tree about its axes; included models (`<include>`, not read yet).
 
 use std::collections::HashMap;
 
 use roxmltree::{Document, Node};
 
 use super::geom::{self, Mat};
-use super::xml::{Cx, child, children, element};
+use super::xml::{Cx, child, element};
 use super::{
     BodyOut, Coord, Imported, LoopOut, Origin, fnum, ident, joint_steps, number, quote, unit,
 };
@@ -57,8 +58,8 @@ fn origin_abs() -> Abs {
 const CUT_ELSEWHERE: [&str; 4] = ["prismatic", "universal", "revolute2", "screw"];
 
 struct Frames<'a, 'i> {
-    /// name -> (element, kind: "link", "joint" or "frame").
-    nodes: HashMap<&'a str, Node<'a, 'i>>,
+    /// Scoped name (`inner::link`) -> a `<link>`, `<joint>`, `<frame>` or nested `<model>`.
+    nodes: HashMap<String, Node<'a, 'i>>,
     done: HashMap<String, Option<Abs>>,
     visiting: Vec<String>,
 }
@@ -111,17 +112,17 @@ pub(super) fn import(cx: &mut Cx<'_>, doc: &Document<'_>) -> Option<Imported> {
     {
         out.gravity = [0, 1, 2].map(|k| number(&g[k].0, g[k].1));
     }
-    for inc in children(model, "include").chain(children(model, "model")) {
+    for inc in nested(model, "include") {
         cx.error(
             &cx.tag(inc),
-            "nested and included models are not supported",
+            "included models are not supported",
             "not read",
             "",
         );
     }
 
-    let links: Vec<Node<'_, '_>> = children(model, "link").collect();
-    let joints: Vec<Node<'_, '_>> = children(model, "joint").collect();
+    let links = nested(model, "link");
+    let joints = nested(model, "joint");
     let mut frames = frames(cx, model, &links, &joints);
     let (tree, closing, floating) = tree(cx, &links, &joints, &mut out);
     for &l in &floating {
@@ -148,12 +149,17 @@ fn frames<'a, 'i>(
     for n in links
         .iter()
         .chain(joints)
-        .chain(children(model, "frame").collect::<Vec<_>>().iter())
+        .chain(nested(model, "frame").iter())
+        .chain(nested(model, "model").iter())
     {
-        let Some(name) = cx.required(*n, "name") else {
+        let Some(local) = cx.required(*n, "name") else {
             continue;
         };
-        if frames.nodes.insert(name, *n).is_some() || name == "world" || name == "__model__" {
+        let name = qname(*n);
+        if frames.nodes.insert(name.clone(), *n).is_some()
+            || local == "world"
+            || local == "__model__"
+        {
             cx.error(
                 &cx.attr_range(*n, "name"),
                 format!("frame name `{name}` is taken"),
@@ -166,14 +172,81 @@ fn frames<'a, 'i>(
     frames
 }
 
-/// A joint's parent and child link, as written.
+/// The elements `tag` of `model` and of the models nested in it (SDFormat 1.8: `<model>` in a
+/// `<model>`), in the file's order.
+fn nested<'a, 'i>(model: Node<'a, 'i>, tag: &str) -> Vec<Node<'a, 'i>> {
+    let mut out = Vec::new();
+    for n in model.children().filter(|n| n.is_element()) {
+        if n.tag_name().name() == tag {
+            out.push(n);
+        }
+        if n.tag_name().name() == "model" {
+            out.extend(nested(n, tag));
+        }
+    }
+    out
+}
+
+/// The scope an element is written in: the names of the models nested in the imported one
+/// around it, each followed by `::` (`""` in the imported model itself).
+fn scope_of(n: Node<'_, '_>) -> String {
+    let mut names = Vec::new();
+    let mut up = n.parent_element();
+    while let Some(m) = up {
+        let outer = m.parent_element();
+        if m.tag_name().name() == "model" {
+            if outer.is_none_or(|o| o.tag_name().name() != "model") {
+                break;
+            }
+            names.push(m.attribute("name").unwrap_or(""));
+        }
+        up = outer;
+    }
+    names.iter().rev().map(|s| format!("{s}::")).collect()
+}
+
+/// An element's scoped name: `inner::link` for a link of the nested model `inner`.
+fn qname(n: Node<'_, '_>) -> String {
+    format!("{}{}", scope_of(n), n.attribute("name").unwrap_or(""))
+}
+
+/// A frame name written in element `n`'s scope, scoped: SDFormat's names are relative to the
+/// model they are written in (`inner::link` from outside `inner`, `link` inside it); `world` is
+/// the world, `__model__` the model the element is written in.
+fn resolve(n: Node<'_, '_>, name: &str) -> String {
+    let scope = scope_of(n);
+    match name {
+        "world" => "world".into(),
+        "__model__" if scope.is_empty() => "__model__".into(),
+        "__model__" => scope.trim_end_matches("::").to_string(),
+        _ => format!("{scope}{name}"),
+    }
+}
+
+/// The help of an unknown name written in a nested model: names there are its own.
+fn scope_help(n: Node<'_, '_>, scoped: &str) -> String {
+    let scope = scope_of(n);
+    if scope.is_empty() {
+        String::new()
+    } else {
+        format!(
+            "written in model `{}`, this names `{scoped}`: a nested model's names are its own \
+             (SDFormat's scopes; a model reaches into a nested one with `model::name`, not out)",
+            scope.trim_end_matches("::")
+        )
+    }
+}
+
+/// A joint's parent and child link, scoped.
 fn ends(j: Node<'_, '_>) -> (String, String) {
     let get = |t: &str| {
-        child(j, t)
-            .and_then(|e| e.text())
-            .map(str::trim)
-            .unwrap_or("")
-            .to_string()
+        resolve(
+            j,
+            child(j, t)
+                .and_then(|e| e.text())
+                .map(str::trim)
+                .unwrap_or(""),
+        )
     };
     (get("parent"), get("child"))
 }
@@ -186,12 +259,12 @@ fn free_root<'a, 'i>(
     l: Node<'a, 'i>,
     out: &mut Imported,
 ) {
-    let name = l.attribute("name").unwrap_or("");
-    let Some(abs) = abs_of(cx, frames, name) else {
+    let name = qname(l);
+    let Some(abs) = abs_of(cx, frames, &name) else {
         return;
     };
     let origin = cx.origin(l);
-    let body = cx.body_name(name);
+    let body = cx.body_name(&name);
     let (coords, step) = super::free_joint(&format!("{body}_free"), &origin);
     out.coordinates.extend(coords);
     let mut transforms = abs.steps.clone();
@@ -232,12 +305,13 @@ fn tree<'a, 'i>(
                 ),
                 Some(e) => {
                     let l = e.text().unwrap_or("").trim();
-                    if l != "world" && !links.iter().any(|k| k.attribute("name") == Some(l)) {
+                    let scoped = resolve(j, l);
+                    if scoped != "world" && !links.iter().any(|k| qname(*k) == scoped) {
                         cx.error(
                             &e.first_child().map_or_else(|| cx.tag(e), |c| c.range()),
                             format!("unknown link `{l}`"),
                             "no `<link>` of this name",
-                            "",
+                            &scope_help(j, &scoped),
                         );
                     }
                 }
@@ -256,12 +330,12 @@ fn tree<'a, 'i>(
         .iter()
         .copied()
         .filter(|l| {
-            let name = l.attribute("name").unwrap_or("");
+            let name = qname(*l);
             !joints.iter().any(|&j| ends(j).1 == name)
         })
         .collect();
     for l in &floating {
-        in_tree.insert(l.attribute("name").unwrap_or("").to_string(), None);
+        in_tree.insert(qname(*l), None);
     }
     let mut tree = Vec::new();
     let mut closing = Vec::new();
@@ -295,8 +369,8 @@ fn tree<'a, 'i>(
         );
     }
     for &l in links {
-        let name = l.attribute("name").unwrap_or("");
-        if !in_tree.contains_key(name) {
+        let name = qname(l);
+        if !in_tree.contains_key(&name) {
             cx.error(
                 &cx.attr_range(l, "name"),
                 format!("link `{name}` is not tied to the world by a joint: it would float"),
@@ -318,11 +392,11 @@ fn tree<'a, 'i>(
             continue;
         }
         let (p, c) = ends(j);
-        let jname = j.attribute("name").unwrap_or("");
+        let jname = &qname(j);
         let Some(&Some(t)) = in_tree.get(&c) else {
             continue;
         };
-        let tname = t.attribute("name").unwrap_or("");
+        let tname = &qname(t);
         // Whether the prismatic joint's parent hangs below its child: then the whole loop does,
         // and no other joint of it can bring the child in.
         let mut up = p.clone();
@@ -421,13 +495,10 @@ fn bodies<'a, 'i>(
 ) {
     for &j in tree {
         let (p, c) = ends(j);
-        let Some(&l) = links
-            .iter()
-            .find(|k| k.attribute("name") == Some(c.as_str()))
-        else {
+        let Some(&l) = links.iter().find(|k| qname(**k) == c) else {
             continue;
         };
-        let jname = cx.joint_name(j.attribute("name").unwrap_or(""));
+        let jname = cx.joint_name(&qname(j));
         let kind = j.attribute("type").unwrap_or("");
         let mut transforms = Vec::new();
         // A pose that failed is reported; the joint and the link are still checked.
@@ -596,7 +667,7 @@ fn loops<'a, 'i>(
 ) {
     for &j in closing {
         let (p, c) = ends(j);
-        let name = cx.joint_name(j.attribute("name").unwrap_or(""));
+        let name = cx.joint_name(&qname(j));
         let kind = match j.attribute("type").unwrap_or("") {
             "ball" => "ball",
             "revolute" | "continuous" => "hinge",
@@ -696,7 +767,7 @@ fn gearboxes<'a, 'i>(
         if g.attribute("type") != Some("gearbox") {
             continue;
         }
-        let gname = g.attribute("name").unwrap_or("");
+        let gname = &qname(g);
         let name = cx.joint_name(gname);
         let Some(rn) = child(g, "gearbox_reference_body") else {
             cx.error(
@@ -708,12 +779,8 @@ fn gearboxes<'a, 'i>(
             );
             continue;
         };
-        let reference = rn.text().unwrap_or("").trim().to_string();
-        if reference != "world"
-            && !links
-                .iter()
-                .any(|k| k.attribute("name") == Some(&reference))
-        {
+        let reference = resolve(g, rn.text().unwrap_or("").trim());
+        if reference != "world" && !links.iter().any(|k| qname(*k) == reference) {
             cx.error(
                 &rn.first_child().map_or_else(|| cx.tag(rn), |c| c.range()),
                 format!("unknown link `{reference}`"),
@@ -774,7 +841,7 @@ fn gearboxes<'a, 'i>(
             let Some(w) = axis_of(cx, frames, t) else {
                 continue;
             };
-            let tname = t.attribute("name").unwrap_or("");
+            let tname = &qname(t);
             let (Some(ga), Some(ta)) = (gabs.clone(), abs_of(cx, frames, tname)) else {
                 continue;
             };
@@ -914,10 +981,9 @@ fn joint_pose<'a, 'i>(
     let Some(p) = child(j, "pose") else {
         return Vec::new();
     };
-    match p.attribute("relative_to") {
+    match p.attribute("relative_to").map(|r| resolve(j, r)) {
         Some(r) if r != child_link => {
-            let name = j.attribute("name").unwrap_or("");
-            let Some(abs) = abs_of(cx, f, name) else {
+            let Some(abs) = abs_of(cx, f, &qname(j)) else {
                 return Vec::new();
             };
             let mut steps = Vec::new();
@@ -1014,7 +1080,7 @@ fn abs_of<'a, 'i>(cx: &mut Cx<'_>, f: &mut Frames<'a, 'i>, name: &str) -> Option
     let tag = node.tag_name().name();
     let pose_node = child(node, "pose");
     // What the pose is relative to: `relative_to`, else a joint's child link, a frame's
-    // `attached_to`, the model.
+    // `attached_to`, the model it is written in (for a nested model: the model around it).
     let default = match tag {
         "joint" => child(node, "child")
             .and_then(|c| c.text())
@@ -1024,20 +1090,24 @@ fn abs_of<'a, 'i>(cx: &mut Cx<'_>, f: &mut Frames<'a, 'i>, name: &str) -> Option
         "frame" => node.attribute("attached_to").unwrap_or("").to_string(),
         _ => String::new(),
     };
-    let base_name = pose_node
+    let written = pose_node
         .and_then(|p| p.attribute("relative_to"))
         .map_or(default, str::to_string);
-    if !base_name.is_empty()
-        && base_name != "world"
-        && base_name != "__model__"
-        && !f.nodes.contains_key(base_name.as_str())
-    {
+    let base_name = resolve(
+        node,
+        if written.is_empty() {
+            "__model__"
+        } else {
+            &written
+        },
+    );
+    if base_name != "world" && base_name != "__model__" && !f.nodes.contains_key(&base_name) {
         let at = pose_node.map_or_else(|| cx.tag(node), |p| cx.attr_range(p, "relative_to"));
         cx.error(
             &at,
-            format!("unknown frame `{base_name}`"),
+            format!("unknown frame `{written}`"),
             "no link, joint or frame of this name",
-            "",
+            &scope_help(node, &base_name),
         );
         f.visiting.pop();
         f.done.insert(name.to_string(), None);
@@ -1089,16 +1159,17 @@ fn axis_in<'a, 'i>(
         );
         return None;
     };
-    let frame = x.attribute("expressed_in").filter(|e| !e.is_empty());
-    let jname = j.attribute("name").unwrap_or("");
-    if let Some(e) = frame
+    let written = x.attribute("expressed_in").filter(|e| !e.is_empty());
+    let frame = written.map(|e| resolve(j, e));
+    let jname = qname(j);
+    if let (Some(e), Some(w)) = (&frame, written)
         && e != "world"
         && e != "__model__"
         && !f.nodes.contains_key(e)
     {
         cx.error(
             &cx.attr_range(x, "expressed_in"),
-            format!("unknown frame `{e}`"),
+            format!("unknown frame `{w}`"),
             "no link, joint or frame of this name",
             "the axis is expressed in the joint's frame unless `expressed_in` names another",
         );
@@ -1116,7 +1187,7 @@ fn axis_in<'a, 'i>(
     };
     match frame {
         Some(e) if e != jname => {
-            let (ea, ja) = (abs_of(cx, f, e)?, abs_of(cx, f, jname)?);
+            let (ea, ja) = (abs_of(cx, f, &e)?, abs_of(cx, f, &jname)?);
             let turned = geom::apply(&geom::mul(&geom::transpose(&ja.r), &ea.r), a);
             let snapped = turned.map(|c| if c.abs() < 1e-12 { 0.0 } else { c });
             unit(snapped)
