@@ -1329,3 +1329,143 @@ fn sdf_nested_models_are_scopes() {
     println!("nested models: link frames against the oracle, worst {worst:e}");
     assert!(worst < 1e-14, "worst {worst:e}");
 }
+
+/// `<include>`: the included file's `<model>` in the `<include>`'s place, a nested model named by
+/// `<include><name>` (else its own name) and placed by `<include><pose>` (else its own). One
+/// arm file included twice (a relative path and `file://`), as `left` and `right`; a gripper by
+/// `model://gripper`, found in the source's directory through its `model.config`. Every link's
+/// world frame is the product of the poses, computed here; the source's hash covers the included
+/// files (an edit of the arm's file changes it).
+#[test]
+fn sdf_includes_are_nested_models() {
+    use rbss_codegen::import::{Format, import_file};
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let inertial = "<inertial><mass>1</mass><inertia><ixx>0.01</ixx><iyy>0.01</iyy>\
+                    <izz>0.01</izz></inertia></inertial>";
+    std::fs::create_dir_all(d.join("parts")).unwrap();
+    std::fs::create_dir_all(d.join("gripper")).unwrap();
+    let arm = format!(
+        "<sdf version=\"1.9\"><model name=\"arm\">\
+         <link name=\"upper\"><pose>0 0 0.1 0 0 0</pose>{inertial}</link>\
+         <link name=\"lower\"><pose relative_to=\"upper\">0.3 0 0 0 0 0</pose>{inertial}</link>\
+         <joint name=\"elbow\" type=\"revolute\"><parent>upper</parent><child>lower</child>\
+         <axis><xyz>0 1 0</xyz></axis></joint></model></sdf>"
+    );
+    std::fs::write(d.join("parts/arm.sdf"), &arm).unwrap();
+    std::fs::write(
+        d.join("gripper/model.config"),
+        "<?xml version=\"1.0\"?><model><name>gripper</name><sdf version=\"1.9\">g.sdf</sdf></model>",
+    )
+    .unwrap();
+    std::fs::write(
+        d.join("gripper/g.sdf"),
+        format!(
+            "<sdf version=\"1.9\"><model name=\"gripper\"><pose>0.5 0 0.3 0 0 0</pose>\
+             <link name=\"finger\">{inertial}</link></model></sdf>"
+        ),
+    )
+    .unwrap();
+    let abs = d.join("parts/arm.sdf").display().to_string();
+    std::fs::write(
+        d.join("robot.sdf"),
+        format!(
+            "<sdf version=\"1.9\"><model name=\"robot\">\
+             <link name=\"base\">{inertial}</link>\
+             <joint name=\"fix\" type=\"fixed\"><parent>world</parent><child>base</child></joint>\
+             <include><uri>parts/arm.sdf</uri><name>left</name><pose>0 0.2 0 0 0 0</pose></include>\
+             <include><uri>file://{abs}</uri><name>right</name><pose>0 -0.2 0 0 0 0</pose></include>\
+             <include><uri>model://gripper</uri></include>\
+             <joint name=\"shoulder_l\" type=\"revolute\"><parent>base</parent><child>left::upper</child>\
+             <axis><xyz>0 0 1</xyz></axis></joint>\
+             <joint name=\"shoulder_r\" type=\"revolute\"><parent>base</parent><child>right::upper</child>\
+             <axis><xyz>0 0 1</xyz></axis></joint>\
+             <joint name=\"grip\" type=\"fixed\"><parent>left::lower</parent><child>gripper::finger</child></joint>\
+             </model></sdf>"
+        ),
+    )
+    .unwrap();
+    let (imp, _) = import_file(&d.join("robot.sdf"), "robot.sdf", Format::Sdf)
+        .unwrap_or_else(|e| panic!("{}", e.render()));
+    let mut bodies: Vec<&str> = imp.bodies.iter().map(|b| b.name.as_str()).collect();
+    bodies.sort();
+    assert_eq!(
+        bodies,
+        [
+            "base",
+            "gripper__finger",
+            "left__lower",
+            "left__upper",
+            "right__lower",
+            "right__upper"
+        ]
+    );
+    let hash = imp.source.as_ref().unwrap().sha256.clone();
+    std::fs::write(d.join("m.toml"), "sdf = \"robot.sdf\"\n").unwrap();
+    let m = model_at(&d.join("m.toml"));
+    let (y, z) = ([0.0, 1.0, 0.0], [0.0, 0.0, 1.0]);
+    let t = |p: [f64; 3]| (p, rot(z, 0.0));
+    let mut worst = 0.0f64;
+    for q in [[0.0; 4], [0.7, -1.1, 0.4, 2.0], [-2.0, 0.5, 2.9, -0.3]] {
+        let at = [
+            ("shoulder_l", q[0]),
+            ("left__elbow", q[1]),
+            ("shoulder_r", q[2]),
+            ("right__elbow", q[3]),
+        ];
+        let mut want = Vec::new();
+        for (side, at_y, s, e) in [("left", 0.2, q[0], q[1]), ("right", -0.2, q[2], q[3])] {
+            let upper = compose(&t([0.0, at_y, 0.1]), &([0.0; 3], rot(z, s)));
+            let lower = compose(
+                &compose(&upper, &t([0.3, 0.0, 0.0])),
+                &([0.0; 3], rot(y, e)),
+            );
+            if side == "left" {
+                // The finger at (0.5, 0, 0.3) as written, carried by the left lower arm from
+                // its place at zero, (0.3, 0.2, 0.1).
+                let finger = compose(&lower, &t([0.2, -0.2, 0.2]));
+                want.push(("gripper__finger".to_string(), finger));
+            }
+            want.push((format!("{side}__upper"), upper));
+            want.push((format!("{side}__lower"), lower));
+        }
+        for (name, w) in &want {
+            worst = worst.max(frame_gap(&frame_at(&m, name, &at), w));
+        }
+    }
+    println!("included models: link frames against the oracle, worst {worst:e}");
+    assert!(worst < 1e-14, "worst {worst:e}");
+
+    std::fs::write(
+        d.join("parts/arm.sdf"),
+        arm.replace("0.3 0 0 0 0 0", "0.35 0 0 0 0 0"),
+    )
+    .unwrap();
+    let (edited, _) = import_file(&d.join("robot.sdf"), "robot.sdf", Format::Sdf)
+        .unwrap_or_else(|e| panic!("{}", e.render()));
+    assert_ne!(edited.source.unwrap().sha256, hash);
+    assert_eq!(
+        rbss_codegen::import::sdf_included_files(
+            &d.join("robot.sdf"),
+            &std::fs::read_to_string(d.join("robot.sdf")).unwrap()
+        )
+        .len(),
+        3
+    );
+
+    // A `model://` that resolves nowhere: one error at the `<uri>`, naming where it looked.
+    std::fs::write(
+        d.join("lost.sdf"),
+        "<sdf version=\"1.9\"><model name=\"lost\"><link name=\"a\"/>\
+         <include><uri>model://nowhere_to_be_found</uri></include></model></sdf>",
+    )
+    .unwrap();
+    let err = import_file(&d.join("lost.sdf"), "lost.sdf", Format::Sdf).unwrap_err();
+    let text = err.render();
+    assert!(
+        text.contains("cannot resolve `model://nowhere_to_be_found`")
+            && text.contains("nowhere_to_be_found")
+            && text.contains("GZ_SIM_RESOURCE_PATH"),
+        "{text}"
+    );
+}

@@ -13,6 +13,7 @@
 //! | a `prismatic`, `universal`, `revolute2` or `screw` joint whose child is already in the tree (no loop kind is such a joint) | it brings the child in (its coordinates), and the joint that brought it in closes the loop instead (as above); refused when that joint is not revolute, ball or fixed, or when the loop hangs below the child (a note says which joint closes) |
 //! | `<joint type="gearbox">` (`<gearbox_ratio>` r, `<gearbox_reference_body>` R, `<axis>`, `<axis2>`) | a `coupling` loop named after the joint: SDFormat's `theta_2 = -r theta_1`, `theta_1` the parent link's angle against R about `<axis>`, `theta_2` the child's about `<axis2>`, i.e. `q2 = -r s1 s2 q1` between the revolute joints of the tree that join parent and child to R (`s = ±1`: the joint's axis along or against the gearbox's, the joint from R to the link or back); `q2` is not actuated |
 //! | `<frame>` | a frame `relative_to` may name |
+//! | `<include>` (`<uri>`: a path, `file://`, `model://NAME` in [`MODEL_PATH_VARS`]' directories and the file's; `<name>`, `<pose>`) | the included file's `<model>` as a nested model in its place ([`includes`], [`register_includes`]) |
 //! | a nested `<model>` (any depth) | its links, joints and frames, scoped: `inner::link` from outside, `link` inside, `__model__` its own frame ([`scope_of`], [`resolve`]); its `<pose>` relative to the model around it |
 //! | `<inertial>` (`<pose>`, `<mass>`, `<inertia>`) | `mass`, `com`, `inertia` (in the link's axes) |
 //! | `<axis><dynamics>` `damping`, `spring_stiffness`, `spring_reference` | `damping`, `stiffness`, `rest` (`friction` ignored, with a warning) |
@@ -22,9 +23,11 @@
 //!
 //! Refused: a prismatic, universal, revolute2 or screw joint closing a loop that no other joint
 //! of it can close; a gearbox whose links are not turned against its reference body by revolute
-//! joints of the tree about its axes; included models (`<include>`, not read yet).
+//! joints of the tree about its axes; an `<include>` whose `<uri>` names no local file.
 
+use std::cell::RefCell;
 use std::collections::HashMap;
+use std::path::{Path, PathBuf};
 
 use roxmltree::{Document, Node};
 
@@ -64,7 +67,315 @@ struct Frames<'a, 'i> {
     visiting: Vec<String>,
 }
 
-pub(super) fn import(cx: &mut Cx<'_>, doc: &Document<'_>) -> Option<Imported> {
+/// An `<include>` and the `<model>` of the file it names.
+type Included<'a, 'i> = (Node<'a, 'i>, Node<'a, 'i>);
+
+thread_local! {
+    /// The included files being imported, by their text's address: the scope the `<include>` is
+    /// written in (`"arm::"`) and the included model's name there (`<include><name>`, else the
+    /// model's own).
+    static INCLUDED: RefCell<HashMap<usize, (String, String)>> = RefCell::new(HashMap::new());
+}
+
+/// The included file's scope and name of an element's document, if it is an included one.
+fn included_as(n: Node<'_, '_>) -> Option<(String, String)> {
+    let key = n.document().input_text().as_ptr() as usize;
+    INCLUDED.with(|m| m.borrow().get(&key).cloned())
+}
+
+/// Whether `n` is the `<model>` of an included file.
+fn is_included_root(n: Node<'_, '_>) -> bool {
+    n.tag_name().name() == "model"
+        && n.parent_element()
+            .is_none_or(|o| o.tag_name().name() != "model")
+        && included_as(n).is_some()
+}
+
+/// The environment variables whose directories `model://NAME` is searched in, in order (then the
+/// including file's directory): libsdformat's `SDF_PATH`, Gazebo's `GZ_SIM_RESOURCE_PATH` (and
+/// `IGN_GAZEBO_RESOURCE_PATH` before it), Gazebo classic's `GAZEBO_MODEL_PATH`.
+pub(crate) const MODEL_PATH_VARS: [&str; 4] = [
+    "SDF_PATH",
+    "GZ_SIM_RESOURCE_PATH",
+    "IGN_GAZEBO_RESOURCE_PATH",
+    "GAZEBO_MODEL_PATH",
+];
+
+/// The file an `<include>`'s `<uri>` names, from a file in `dir`: a path (relative to `dir`),
+/// `file://PATH`, or `model://NAME[/...]` searched in the directories of [`MODEL_PATH_VARS`]
+/// and `dir`. A directory is a model's: the file its `model.config`'s `<sdf>` names, else
+/// `model.sdf`. Else the places looked at (none for a URI that is no local file).
+fn resolve_uri(uri: &str, dir: &Path) -> Result<PathBuf, Vec<PathBuf>> {
+    let uri = uri.trim();
+    let candidates: Vec<PathBuf> = if let Some(rest) = uri.strip_prefix("model://") {
+        let mut dirs: Vec<PathBuf> = Vec::new();
+        for var in MODEL_PATH_VARS {
+            if let Some(v) = std::env::var_os(var) {
+                dirs.extend(std::env::split_paths(&v).filter(|d| !d.as_os_str().is_empty()));
+            }
+        }
+        dirs.push(dir.to_path_buf());
+        dirs.iter().map(|d| d.join(rest)).collect()
+    } else if let Some(rest) = uri.strip_prefix("file://") {
+        vec![dir.join(rest)]
+    } else if uri.contains("://") {
+        return Err(Vec::new());
+    } else {
+        vec![dir.join(uri)]
+    };
+    for c in &candidates {
+        if c.is_file() {
+            return Ok(c.clone());
+        }
+        if c.is_dir() {
+            let named = std::fs::read_to_string(c.join("model.config"))
+                .ok()
+                .and_then(|t| {
+                    Document::parse(&t).ok().and_then(|d| {
+                        d.descendants()
+                            .find(|n| n.has_tag_name("sdf"))
+                            .and_then(|n| n.text())
+                            .map(|t| c.join(t.trim()))
+                    })
+                });
+            for f in named.into_iter().chain([c.join("model.sdf")]) {
+                if f.is_file() {
+                    return Ok(f);
+                }
+            }
+        }
+    }
+    Err(candidates)
+}
+
+/// The `<include>` elements of an SDF text and their `<uri>`s, with the element's offset.
+fn include_uris(text: &str) -> Vec<(usize, String)> {
+    let opts = roxmltree::ParsingOptions {
+        allow_dtd: false,
+        nodes_limit: super::MAX_NODES,
+        ..Default::default()
+    };
+    let Ok(doc) = Document::parse_with_options(text, opts) else {
+        return Vec::new();
+    };
+    doc.descendants()
+        .filter(|n| n.is_element() && n.tag_name().name() == "include")
+        .map(|n| {
+            let uri = child(n, "uri").and_then(|u| u.text()).unwrap_or("");
+            (n.range().start, uri.trim().to_string())
+        })
+        .collect()
+}
+
+/// Every file an SDF source includes, transitively (those that resolve and read).
+pub(super) fn included_files(path: &Path, text: &str) -> Vec<PathBuf> {
+    let mut out: Vec<PathBuf> = Vec::new();
+    let mut queue = vec![(path.to_path_buf(), text.to_string())];
+    let mut i = 0;
+    while i < queue.len() && out.len() < MAX_INCLUDES {
+        let (from, t) = queue[i].clone();
+        i += 1;
+        let dir = from.parent().unwrap_or(Path::new("")).to_path_buf();
+        for (_, uri) in include_uris(&t) {
+            if let Ok(p) = resolve_uri(&uri, &dir)
+                && out.len() < MAX_INCLUDES
+                && let Ok(b) = std::fs::read_to_string(&p)
+            {
+                out.push(p.clone());
+                queue.push((p, b));
+            }
+        }
+    }
+    out
+}
+
+/// At most this many included files (each inclusion counts: a model included twice is read
+/// twice, as two models).
+const MAX_INCLUDES: usize = 64;
+
+/// The files the source's `<include>`s name, transitively, each inclusion once, in breadth-first
+/// order: `(key, path as shown, text)`, the key the including file's shown path and the
+/// `<include>`'s byte offset. A `<uri>` that resolves to no file is an error at it that names the
+/// places looked at; a file that includes itself (through others) is refused.
+pub(super) fn includes(
+    path: &Path,
+    shown: &str,
+    text: &str,
+) -> Result<Vec<(String, String, String)>, crate::diagnostics::Diagnostics> {
+    let mut out: Vec<(String, String, String)> = Vec::new();
+    // (path, shown, text, the files including it)
+    let mut queue: Vec<(PathBuf, String, String, Vec<PathBuf>)> = vec![(
+        path.to_path_buf(),
+        shown.to_string(),
+        text.to_string(),
+        Vec::new(),
+    )];
+    let mut i = 0;
+    while i < queue.len() {
+        let (from, from_shown, from_text, chain) = queue[i].clone();
+        i += 1;
+        let uris = include_uris(&from_text);
+        if uris.is_empty() {
+            continue;
+        }
+        let doc = Document::parse_with_options(
+            &from_text,
+            roxmltree::ParsingOptions {
+                allow_dtd: false,
+                nodes_limit: super::MAX_NODES,
+                ..Default::default()
+            },
+        )
+        .ok();
+        let Some(doc) = doc else { continue };
+        let mut cx = Cx::new(&from_shown, &from_text);
+        let dir = from.parent().unwrap_or(Path::new("")).to_path_buf();
+        for inc in doc
+            .descendants()
+            .filter(|n| n.is_element() && n.tag_name().name() == "include")
+        {
+            let Some(u) = child(inc, "uri") else {
+                cx.error(&cx.tag(inc), "the `<include>` has no `<uri>`", "", "");
+                continue;
+            };
+            let uri = u.text().unwrap_or("").trim();
+            let at = u.first_child().map_or_else(|| cx.tag(u), |c| c.range());
+            let p = match resolve_uri(uri, &dir) {
+                Ok(p) => p,
+                Err(looked) => {
+                    let places: Vec<String> =
+                        looked.iter().map(|p| p.display().to_string()).collect();
+                    cx.error(
+                        &at,
+                        format!("cannot resolve `{uri}`"),
+                        if places.is_empty() {
+                            "not a local file"
+                        } else {
+                            "no such file or model directory"
+                        },
+                        &if places.is_empty() {
+                            "only local files are read: a path (relative to this file), \
+                             `file://PATH` or `model://NAME`"
+                                .to_string()
+                        } else {
+                            format!(
+                                "looked at {}{}",
+                                places.join(", "),
+                                if uri.starts_with("model://") {
+                                    " (`model://` is searched in the directories of SDF_PATH, \
+                                     GZ_SIM_RESOURCE_PATH, IGN_GAZEBO_RESOURCE_PATH, \
+                                     GAZEBO_MODEL_PATH, then this file's)"
+                                } else {
+                                    ""
+                                }
+                            )
+                        },
+                    );
+                    continue;
+                }
+            };
+            let same = |a: &Path, b: &Path| {
+                a == b
+                    || a.canonicalize()
+                        .is_ok_and(|x| b.canonicalize().is_ok_and(|y| x == y))
+            };
+            if same(&p, &from) || chain.iter().any(|c| same(&p, c.as_path())) {
+                cx.error(
+                    &at,
+                    format!("`{uri}` includes the file that includes it"),
+                    "an endless inclusion",
+                    "",
+                );
+                continue;
+            }
+            if out.len() >= MAX_INCLUDES {
+                cx.error(&at, "more than 64 included models", "", "");
+                break;
+            }
+            let p_shown = p.display().to_string().replace('\\', "/");
+            match super::read_xml(&p, &p_shown) {
+                Ok(t) => {
+                    let mut up = chain.clone();
+                    up.push(from.clone());
+                    queue.push((p.clone(), p_shown.clone(), t.clone(), up));
+                    out.push((format!("{from_shown}@{}", inc.range().start), p_shown, t));
+                }
+                Err(e) => {
+                    let why = e.items.first().map_or(String::new(), |d| d.message.clone());
+                    cx.error(&at, format!("cannot include `{p_shown}`: {why}"), "", "");
+                }
+            }
+        }
+        if let (Some(errors), _) = cx.finish() {
+            return Err(errors);
+        }
+    }
+    Ok(out)
+}
+
+/// The `<include>`s of `model` and of the models in it, each with the `<model>` of its file
+/// (registered in [`INCLUDED`] with its scope and name, outer ones first).
+fn register_includes<'a, 'i>(
+    cx: &mut Cx<'_>,
+    model: Node<'a, 'i>,
+    roots: &[(&str, Node<'a, 'i>)],
+    out: &mut Vec<Included<'a, 'i>>,
+) {
+    for n in model.children().filter(|n| n.is_element()) {
+        match n.tag_name().name() {
+            "model" => register_includes(cx, n, roots, out),
+            "include" => {
+                let key = format!("{}@{}", cx.path_of(n), n.range().start);
+                let Some(&(_, root)) = roots.iter().find(|(k, _)| *k == key) else {
+                    continue;
+                };
+                let m = child(root, "model")
+                    .or_else(|| child(root, "world").and_then(|w| child(w, "model")));
+                let Some(m) = m else {
+                    cx.error(&cx.tag(n), "the included file has no `<model>`", "", "");
+                    continue;
+                };
+                if let Some(pf) = child(n, "placement_frame") {
+                    cx.error(
+                        &cx.tag(pf),
+                        "`<placement_frame>` is not supported",
+                        "not read",
+                        "give the `<include>`'s `<pose>` of the model's frame",
+                    );
+                }
+                let name = child(n, "name")
+                    .and_then(|e| e.text())
+                    .map(str::trim)
+                    .or(m.attribute("name"))
+                    .unwrap_or("")
+                    .to_string();
+                let key = m.document().input_text().as_ptr() as usize;
+                let scope = scope_of(n);
+                INCLUDED.with(|r| r.borrow_mut().insert(key, (scope, name)));
+                out.push((n, m));
+                register_includes(cx, m, roots, out);
+            }
+            _ => {}
+        }
+    }
+}
+
+pub(super) fn import<'a, 'i>(
+    cx: &mut Cx<'_>,
+    doc: &'a Document<'i>,
+    roots: &[(&str, Node<'a, 'i>)],
+) -> Option<Imported> {
+    INCLUDED.with(|r| r.borrow_mut().clear());
+    let out = import_model(cx, doc, roots);
+    INCLUDED.with(|r| r.borrow_mut().clear());
+    out
+}
+
+fn import_model<'a, 'i>(
+    cx: &mut Cx<'_>,
+    doc: &'a Document<'i>,
+    roots: &[(&str, Node<'a, 'i>)],
+) -> Option<Imported> {
     let root = doc.root_element();
     if root.tag_name().name() != "sdf" {
         cx.error(
@@ -112,18 +423,11 @@ pub(super) fn import(cx: &mut Cx<'_>, doc: &Document<'_>) -> Option<Imported> {
     {
         out.gravity = [0, 1, 2].map(|k| number(&g[k].0, g[k].1));
     }
-    for inc in nested(model, "include") {
-        cx.error(
-            &cx.tag(inc),
-            "included models are not supported",
-            "not read",
-            "",
-        );
-    }
-
-    let links = nested(model, "link");
-    let joints = nested(model, "joint");
-    let mut frames = frames(cx, model, &links, &joints);
+    let mut inc = Vec::new();
+    register_includes(cx, model, roots, &mut inc);
+    let links = nested(model, "link", &inc);
+    let joints = nested(model, "joint", &inc);
+    let mut frames = frames(cx, model, &links, &joints, &inc);
     let (tree, closing, floating) = tree(cx, &links, &joints, &mut out);
     for &l in &floating {
         free_root(cx, &mut frames, l, &mut out);
@@ -140,6 +444,7 @@ fn frames<'a, 'i>(
     model: Node<'a, 'i>,
     links: &[Node<'a, 'i>],
     joints: &[Node<'a, 'i>],
+    inc: &[Included<'a, 'i>],
 ) -> Frames<'a, 'i> {
     let mut frames = Frames {
         nodes: HashMap::new(),
@@ -149,14 +454,19 @@ fn frames<'a, 'i>(
     for n in links
         .iter()
         .chain(joints)
-        .chain(nested(model, "frame").iter())
-        .chain(nested(model, "model").iter())
+        .chain(nested(model, "frame", inc).iter())
+        .chain(nested(model, "model", inc).iter())
     {
         let Some(local) = cx.required(*n, "name") else {
             continue;
         };
         let name = qname(*n);
-        if frames.nodes.insert(name.clone(), *n).is_some()
+        // An included model is placed by the `<include>`'s `<pose>` when it has one.
+        let placed = match inc.iter().find(|(_, m)| m == n) {
+            Some((i, _)) if child(*i, "pose").is_some() => *i,
+            _ => *n,
+        };
+        if frames.nodes.insert(name.clone(), placed).is_some()
             || local == "world"
             || local == "__model__"
         {
@@ -173,15 +483,24 @@ fn frames<'a, 'i>(
 }
 
 /// The elements `tag` of `model` and of the models nested in it (SDFormat 1.8: `<model>` in a
-/// `<model>`), in the file's order.
-fn nested<'a, 'i>(model: Node<'a, 'i>, tag: &str) -> Vec<Node<'a, 'i>> {
+/// `<model>`) or included (`<include>`: the included file's `<model>` in its place), in the
+/// file's order.
+fn nested<'a, 'i>(model: Node<'a, 'i>, tag: &str, inc: &[Included<'a, 'i>]) -> Vec<Node<'a, 'i>> {
     let mut out = Vec::new();
     for n in model.children().filter(|n| n.is_element()) {
+        let inner = match n.tag_name().name() {
+            "model" => Some(n),
+            "include" => inc.iter().find(|(i, _)| *i == n).map(|(_, m)| *m),
+            _ => None,
+        };
         if n.tag_name().name() == tag {
             out.push(n);
         }
-        if n.tag_name().name() == "model" {
-            out.extend(nested(n, tag));
+        if let Some(m) = inner {
+            if tag == "model" && m != n {
+                out.push(m);
+            }
+            out.extend(nested(m, tag, inc));
         }
     }
     out
@@ -190,23 +509,37 @@ fn nested<'a, 'i>(model: Node<'a, 'i>, tag: &str) -> Vec<Node<'a, 'i>> {
 /// The scope an element is written in: the names of the models nested in the imported one
 /// around it, each followed by `::` (`""` in the imported model itself).
 fn scope_of(n: Node<'_, '_>) -> String {
+    if is_included_root(n) {
+        return included_as(n).map(|(scope, _)| scope).unwrap_or_default();
+    }
     let mut names = Vec::new();
+    let mut base = String::new();
     let mut up = n.parent_element();
     while let Some(m) = up {
         let outer = m.parent_element();
         if m.tag_name().name() == "model" {
             if outer.is_none_or(|o| o.tag_name().name() != "model") {
+                // The file's model: the imported one, or an included one (named by its include).
+                if let Some((scope, name)) = included_as(m) {
+                    names.push(name);
+                    base = scope;
+                }
                 break;
             }
-            names.push(m.attribute("name").unwrap_or(""));
+            names.push(m.attribute("name").unwrap_or("").to_string());
         }
         up = outer;
     }
-    names.iter().rev().map(|s| format!("{s}::")).collect()
+    let inner: String = names.iter().rev().map(|s| format!("{s}::")).collect();
+    format!("{base}{inner}")
 }
 
 /// An element's scoped name: `inner::link` for a link of the nested model `inner`.
 fn qname(n: Node<'_, '_>) -> String {
+    if is_included_root(n) {
+        let (scope, name) = included_as(n).unwrap_or_default();
+        return format!("{scope}{name}");
+    }
     format!("{}{}", scope_of(n), n.attribute("name").unwrap_or(""))
 }
 
