@@ -279,13 +279,14 @@ impl Inputs {
                 doc.get_ref().iter().find_map(|(k, v)| {
                     let key = k.get_ref().as_ref();
                     matches!(key, "urdf" | "mjcf" | "sdf")
-                        .then(|| (key == "mjcf", v.get_ref().as_str().map(str::to_string)))
+                        .then(|| (key.to_string(), v.get_ref().as_str().map(str::to_string)))
                 })
             });
         inputs.files.push((path, bytes));
-        let Some((mjcf, Some(rel))) = source else {
+        let Some((key, Some(rel))) = source else {
             return Ok(inputs);
         };
+        let (mjcf, sdf) = (key == "mjcf", key == "sdf");
         if rel.trim().is_empty() {
             return Ok(inputs);
         }
@@ -300,7 +301,18 @@ impl Inputs {
         inputs.has_source = true;
         let src_dir = src_path.parent().unwrap_or(Path::new("")).to_path_buf();
         inputs.files.push((src_path.clone(), src_bytes));
-        if mjcf {
+        if sdf {
+            // SDF's `<include>`s, resolved as the importer resolves them (relative paths,
+            // `file://`, `model://` in SDF_PATH and Gazebo's directories), in its order.
+            let text = String::from_utf8_lossy(&inputs.files[1].1).into_owned();
+            for p in rbss_codegen::import::sdf_included_files(&src_path, &text) {
+                match fs::read(&p) {
+                    Ok(b) => inputs.files.push((p, b)),
+                    // The generator reports it, located at the `<include>`.
+                    Err(_) => return Ok(inputs),
+                }
+            }
+        } else if mjcf {
             // Breadth first, in document order, each `file` once, at most 64: the generator's
             // order (codegen/src/import/mjcf.rs), which its hash of the source follows.
             let mut seen: Vec<String> = Vec::new();

@@ -937,3 +937,45 @@ fn the_library_is_hashed_once_per_state_of_the_file() {
     assert!(verify_entry(dir, "k").unwrap());
     assert!(!verify_entry(dir, "k").unwrap());
 }
+
+/// An SDF source's `<include>`d files are in the key, as MJCF's are: the included arm's mass
+/// and inertia made ten times heavier, the robot is compiled again and its M and psi are ten
+/// times the first (a key without the included file would serve the first robot from the cache).
+#[test]
+fn sdf_include_edits_are_in_the_key() {
+    let tmp = tempfile::Builder::new()
+        .prefix("rbss-model-file-sdf-")
+        .tempdir()
+        .unwrap();
+    let cache = tmp.path().join("cache");
+    let dir = tmp.path().join("robot");
+    std::fs::create_dir_all(dir.join("parts")).unwrap();
+    let arm = |k: f64| {
+        format!(
+            "<sdf version=\"1.9\"><model name=\"arm\"><link name=\"upper\"><inertial>\
+             <pose>0.1 0 0 0 0 0</pose><mass>{}</mass><inertia><ixx>{}</ixx><iyy>{}</iyy>\
+             <izz>{}</izz></inertia></inertial></link></model></sdf>",
+            k,
+            0.001 * k,
+            0.002 * k,
+            0.003 * k
+        )
+    };
+    std::fs::write(dir.join("parts/arm.sdf"), arm(1.0)).unwrap();
+    std::fs::write(
+        dir.join("robot.sdf"),
+        "<sdf version=\"1.9\"><model name=\"robot\"><include><uri>parts/arm.sdf</uri></include>\
+         <joint name=\"q\" type=\"revolute\"><parent>world</parent><child>arm::upper</child>\
+         <axis><xyz>0 1 0</xyz></axis></joint></model></sdf>",
+    )
+    .unwrap();
+    std::fs::write(dir.join("robot.toml"), "sdf = \"robot.sdf\"\n").unwrap();
+    let x = [0.3];
+    let (m1, psi1, stderr) = mass_and_psi(&cache, &dir, "robot.toml", &x);
+    assert!(stderr.contains("compiling robot"), "{stderr}");
+    std::fs::write(dir.join("parts/arm.sdf"), arm(10.0)).unwrap();
+    let (m2, psi2, stderr) = mass_and_psi(&cache, &dir, "robot.toml", &x);
+    assert!(stderr.contains("compiling robot"), "{stderr}");
+    assert_ten_times("M", &m2, &m1);
+    assert_ten_times("psi", &psi2, &psi1);
+}

@@ -1412,3 +1412,455 @@ for i in range(1, m.nbody):
          moments), {worst_axes:e} (inertia entries)"
     );
 }
+
+/// The world frame of body `body` (position, rotation) at `x` (by the coordinates' names).
+fn frame_at(m: &Model, body: &str, at: &[(&str, f64)]) -> ([f64; 3], [[f64; 3]; 3]) {
+    let x: Vec<f64> = m
+        .coordinates
+        .iter()
+        .map(|c| at.iter().find(|(n, _)| *n == c.name).unwrap().1)
+        .collect();
+    let d = derived(m);
+    let p: Vec<f64> = m.parameters.iter().map(|q| q.value).collect();
+    let vals = d.graph.eval_all(&x, &vec![0.0; x.len()], &p);
+    let k = m.bodies.iter().position(|b| b.name == body).unwrap();
+    let fr = &d.frames[k];
+    (
+        std::array::from_fn(|i| vals[fr.p[i] as usize]),
+        std::array::from_fn(|i| std::array::from_fn(|j| vals[fr.r[i][j] as usize])),
+    )
+}
+
+/// The rotation by `t` about the unit axis `a` (Rodrigues).
+fn rot(a: [f64; 3], t: f64) -> [[f64; 3]; 3] {
+    let (s, c) = t.sin_cos();
+    std::array::from_fn(|i| {
+        std::array::from_fn(|j| {
+            let k = [[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]][i][j];
+            let e = if i == j { c } else { 0.0 };
+            e + s * k + (1.0 - c) * a[i] * a[j]
+        })
+    })
+}
+
+fn mat_mul(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
+    std::array::from_fn(|i| std::array::from_fn(|j| (0..3).map(|k| a[i][k] * b[k][j]).sum()))
+}
+
+fn mat_vec(a: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
+    std::array::from_fn(|i| (0..3).map(|k| a[i][k] * v[k]).sum())
+}
+
+/// The largest entry of `|a - b|` over a frame's position and rotation.
+fn frame_gap(a: &([f64; 3], [[f64; 3]; 3]), b: &([f64; 3], [[f64; 3]; 3])) -> f64 {
+    let mut worst = 0.0f64;
+    for i in 0..3 {
+        worst = worst.max((a.0[i] - b.0[i]).abs());
+        for j in 0..3 {
+            worst = worst.max((a.1[i][j] - b.1[i][j]).abs());
+        }
+    }
+    worst
+}
+
+/// SDF `universal` and `revolute2` joints are two coordinates `NAME_1`, `NAME_2`: the angle about
+/// `<axis>`, then about `<axis2>` as turned by the first (two revolute joints in series), both
+/// axes in the joint's frame unless `expressed_in` names another (ujoint.sdf's `w`: `<axis>` in a
+/// `<frame>` turned 0.3 rad about x, `<axis2>` in the model's frame). The child's frame is
+/// `J R(axis, q1) R(axis2, q2) J⁻¹` (J the joint's pose), computed here; the imported robot derives
+/// the kernels of ujoint.toml, written by hand.
+#[test]
+fn sdf_universal_and_revolute2_joints_are_two_angles() {
+    let imported = model_at(&here().join("ujoint_sdf.toml"));
+    let plain = model_at(&here().join("ujoint.toml"));
+    let names: Vec<&str> = imported
+        .coordinates
+        .iter()
+        .map(|c| c.name.as_str())
+        .collect();
+    assert_eq!(names, ["u_1", "u_2", "w_1", "w_2"]);
+    assert_eq!(imported.actuated, [0, 1, 2, 3]);
+    let (x, z) = ([1.0, 0.0, 0.0], [0.0, 0.0, 1.0]);
+    let tilted_y = [0.0, 0.3f64.cos(), 0.3f64.sin()];
+    let mut worst = 0.0f64;
+    for (u1, u2, w1, w2) in [(0.4, -0.7, 1.1, 0.3), (-2.0, 1.3, -0.6, 2.5)] {
+        let at = [("u_1", u1), ("u_2", u2), ("w_1", w1), ("w_2", w2)];
+        // The arm: the joint 0.4 above the world's origin, the arm 0.1 above the joint.
+        let ru = mat_mul(&rot(z, u1), &rot(x, u2));
+        let pj = [0.0, 0.0, 0.4];
+        let d = mat_vec(&ru, [0.0, 0.0, 0.1]);
+        let arm = ([pj[0] + d[0], pj[1] + d[1], pj[2] + d[2]], ru);
+        // The hand: 0.4 above the arm, turned about tilted y, then about x (turned with it).
+        let dh = mat_vec(&ru, [0.0, 0.0, 0.4]);
+        let rh = mat_mul(&ru, &mat_mul(&rot(tilted_y, w1), &rot(x, w2)));
+        let hand = ([arm.0[0] + dh[0], arm.0[1] + dh[1], arm.0[2] + dh[2]], rh);
+        worst = worst.max(frame_gap(&frame_at(&imported, "arm", &at), &arm));
+        worst = worst.max(frame_gap(&frame_at(&imported, "hand", &at), &hand));
+        // Not the other order: R(axis2, q2) R(axis, q1) is another frame.
+        let swapped = mat_mul(&rot(x, u2), &rot(z, u1));
+        assert!(frame_gap(&frame_at(&imported, "arm", &at), &(arm.0, swapped)) > 1e-2);
+    }
+    println!("universal/revolute2 frames against the oracle: worst {worst:e}");
+    assert!(worst < 1e-14, "worst {worst:e}");
+    let kernels = worst_difference(&plain, &imported);
+    println!("ujoint from SDF vs ujoint.toml: worst relative difference {kernels:e}");
+    assert!(kernels < 1e-12, "worst {kernels:e}");
+}
+
+/// SDF `screw` joints are one coordinate, the angle `q` about `<axis>`, with the translation along
+/// it: `<screw_thread_pitch>` p (SDF 1.10, m per revolution, positive right-handed) moves `p q /
+/// (2 pi)`, the deprecated `<thread_pitch>` t (rad/m, positive left-handed) `-q / t`. Each nut's
+/// frame relative to its parent is the rotation about the axis and `offset + lead(q) axis`,
+/// computed here; the imported robot derives the kernels of screw.toml, written by hand.
+#[test]
+fn sdf_screw_joints_turn_and_advance_by_the_pitch() {
+    let imported = model_at(&here().join("screw_sdf.toml"));
+    let plain = model_at(&here().join("screw.toml"));
+    assert_eq!(imported.actuated, [0, 1, 2]);
+    let s2 = std::f64::consts::FRAC_1_SQRT_2;
+    let tau = 2.0 * std::f64::consts::PI;
+    // (body, parent, axis in the parent's axes, offset, the lead per rad)
+    type Screw<'a> = (&'a str, Option<&'a str>, [f64; 3], [f64; 3], f64);
+    let joints: [Screw<'_>; 3] = [
+        ("nut", None, [0.0, 0.0, 1.0], [0.0, 0.0, 0.2], 0.005 / tau),
+        (
+            "nut2",
+            Some("nut"),
+            [0.0, -1.0, 0.0],
+            [0.1, 0.0, 0.0],
+            1.0 / 200.0,
+        ),
+        (
+            "nut3",
+            Some("nut2"),
+            [s2, s2, 0.0],
+            [0.0, 0.0, 0.1],
+            -0.01 / tau,
+        ),
+    ];
+    let mut worst = 0.0f64;
+    for q in [[0.8, -1.7, 2.2], [-3.0, 0.4, -0.9]] {
+        let at = [("lead", q[0]), ("old", q[1]), ("slant", q[2])];
+        for (k, (body, parent, axis, offset, per_rad)) in joints.iter().enumerate() {
+            let (pc, rc) = frame_at(&imported, body, &at);
+            let (pp, rp) = match parent {
+                Some(p) => frame_at(&imported, p, &at),
+                None => ([0.0; 3], rot([0.0, 0.0, 1.0], 0.0)),
+            };
+            // The child in the parent's axes.
+            let rpt: [[f64; 3]; 3] = std::array::from_fn(|i| std::array::from_fn(|j| rp[j][i]));
+            let rel_p = mat_vec(&rpt, [pc[0] - pp[0], pc[1] - pp[1], pc[2] - pp[2]]);
+            let rel_r = mat_mul(&rpt, &rc);
+            let want_p: [f64; 3] = std::array::from_fn(|i| offset[i] + per_rad * q[k] * axis[i]);
+            worst = worst.max(frame_gap(&(rel_p, rel_r), &(want_p, rot(*axis, q[k]))));
+        }
+    }
+    println!("screw frames against the oracle: worst {worst:e}");
+    assert!(worst < 1e-14, "worst {worst:e}");
+    let kernels = worst_difference(&plain, &imported);
+    println!("screw from SDF vs screw.toml: worst relative difference {kernels:e}");
+    assert!(kernels < 1e-12, "worst {kernels:e}");
+}
+
+/// A universal joint that closes a loop (no loop kind is a universal joint) brings its child in,
+/// and the joint that brought the child in (the ball `b2`) closes the loop instead, as for a
+/// prismatic joint; a note says so. uloop.sdf: a crank on a ball joint at the origin, its tip
+/// (0.2, 0, 0) the ball `b2` to a rod that hangs from the world by the universal joint `u` at
+/// (0.2, 0, 0.3). The loop's `f` is the crank's tip less the rod's end, both computed here:
+/// `Rx Ry Rz (0.2, 0, 0)` and `(0.2, 0, 0.3) + Rz(u_1) Ry(u_2) (0, 0, -0.3)`.
+#[test]
+fn sdf_universal_joint_closing_a_loop_is_in_the_tree() {
+    use rbss_codegen::import::{Format, import_file};
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let inertial = "<inertial><mass>1</mass><inertia><ixx>0.01</ixx><iyy>0.01</iyy>\
+                    <izz>0.01</izz></inertia></inertial>";
+    std::fs::write(
+        d.join("uloop.sdf"),
+        format!(
+            "<sdf version=\"1.9\"><model name=\"uloop\">\
+             <link name=\"crank\">{inertial}</link>\
+             <link name=\"rod\"><pose>0.2 0 0 0 0 0</pose>{inertial}</link>\
+             <joint name=\"r\" type=\"ball\"><parent>world</parent><child>crank</child></joint>\
+             <joint name=\"b2\" type=\"ball\"><parent>crank</parent><child>rod</child></joint>\
+             <joint name=\"u\" type=\"universal\"><parent>world</parent><child>rod</child>\
+             <pose>0 0 0.3 0 0 0</pose>\
+             <axis><xyz>0 0 1</xyz></axis><axis2><xyz>0 1 0</xyz></axis2></joint>\
+             </model></sdf>"
+        ),
+    )
+    .unwrap();
+    let (imp, _) = import_file(&d.join("uloop.sdf"), "uloop.sdf", Format::Sdf)
+        .unwrap_or_else(|e| panic!("{}", e.render()));
+    let coords: Vec<&str> = imp.coordinates.iter().map(|c| c.name.as_str()).collect();
+    assert_eq!(coords, ["r_x", "r_y", "r_z", "u_1", "u_2"]);
+    assert_eq!(imp.loops.len(), 1);
+    assert_eq!(imp.loops[0].keys[0], ("name", "\"b2\"".to_string()));
+    assert_eq!(imp.loops[0].keys[1], ("kind", "\"ball\"".to_string()));
+    assert!(
+        imp.notes
+            .iter()
+            .any(|n| n.contains("universal joint `u`") && n.contains("`b2`")),
+        "{:?}",
+        imp.notes
+    );
+    std::fs::write(d.join("m.toml"), "sdf = \"uloop.sdf\"\n").unwrap();
+    let m = model_at(&d.join("m.toml"));
+    let (x, y, z) = ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]);
+    let mut worst = 0.0f64;
+    for q in [
+        [0.0; 5],
+        [0.3, -0.2, 0.9, 0.4, -0.3],
+        [-1.2, 0.7, -2.0, 2.1, 0.9],
+    ] {
+        let at = [
+            ("r_x", q[0]),
+            ("r_y", q[1]),
+            ("r_z", q[2]),
+            ("u_1", q[3]),
+            ("u_2", q[4]),
+        ];
+        let f = f_at(&m, &at);
+        let rc = mat_mul(&rot(x, q[0]), &mat_mul(&rot(y, q[1]), &rot(z, q[2])));
+        let tip = mat_vec(&rc, [0.2, 0.0, 0.0]);
+        let hang = mat_vec(&mat_mul(&rot(z, q[3]), &rot(y, q[4])), [0.0, 0.0, -0.3]);
+        let end = [0.2 + hang[0], hang[1], 0.3 + hang[2]];
+        assert_eq!(f.len(), 3);
+        for k in 0..3 {
+            worst = worst.max((f[k] - (tip[k] - end[k])).abs());
+        }
+    }
+    println!("universal loop: f against the oracle, worst {worst:e}");
+    assert!(worst < 1e-15, "worst {worst:e}");
+}
+
+/// `[[f64; 3]; 3]` and a position: a rigid transform, `a * b`.
+fn compose(
+    a: &([f64; 3], [[f64; 3]; 3]),
+    b: &([f64; 3], [[f64; 3]; 3]),
+) -> ([f64; 3], [[f64; 3]; 3]) {
+    let d = mat_vec(&a.1, b.0);
+    (
+        [a.0[0] + d[0], a.0[1] + d[1], a.0[2] + d[2]],
+        mat_mul(&a.1, &b.1),
+    )
+}
+
+/// Nested models (SDFormat 1.8): a `<model>` inside the model is a scope, its links and joints
+/// named `arm::upper` from outside it (bodies `arm__upper`, coordinates `arm__elbow`) and
+/// `upper` inside it; its `<pose>` is relative to the model around it (or `relative_to` a frame
+/// of that scope), and `__model__` inside it is its own frame. Two levels here: `arm` in the
+/// robot, `hand` in `arm`, placed relative to `lower` (a name of arm's scope), the palm relative
+/// to hand's `__model__`; a joint of the outer model reaches `arm::upper`, one of `arm` reaches
+/// `hand::palm`. Every link's world frame is the product of the poses, computed here, at zero
+/// and with the joints turned.
+#[test]
+fn sdf_nested_models_are_scopes() {
+    use rbss_codegen::import::{Format, import_file};
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let inertial = "<inertial><mass>1</mass><inertia><ixx>0.01</ixx><iyy>0.01</iyy>\
+                    <izz>0.01</izz></inertia></inertial>";
+    std::fs::write(
+        d.join("nested.sdf"),
+        format!(
+            "<sdf version=\"1.9\"><model name=\"robot\">\
+             <link name=\"base\">{inertial}</link>\
+             <joint name=\"fix\" type=\"fixed\"><parent>world</parent><child>base</child></joint>\
+             <model name=\"arm\"><pose>0.1 0 0.2 0 0 0.5</pose>\
+               <link name=\"upper\"><pose>0 0 0.1 0 0 0</pose>{inertial}</link>\
+               <link name=\"lower\"><pose relative_to=\"upper\">0.3 0 0 0 0 0</pose>{inertial}</link>\
+               <joint name=\"elbow\" type=\"revolute\"><parent>upper</parent><child>lower</child>\
+               <axis><xyz>0 1 0</xyz></axis></joint>\
+               <model name=\"hand\"><pose relative_to=\"lower\">0.2 0 0 0.4 0 0</pose>\
+                 <link name=\"palm\"><pose relative_to=\"__model__\">0 0.05 0 0 0 0</pose>{inertial}</link>\
+               </model>\
+               <joint name=\"wrist\" type=\"revolute\"><parent>lower</parent><child>hand::palm</child>\
+               <axis><xyz expressed_in=\"__model__\">1 0 0</xyz></axis></joint>\
+             </model>\
+             <joint name=\"shoulder\" type=\"revolute\"><parent>base</parent><child>arm::upper</child>\
+             <axis><xyz>0 0 1</xyz></axis></joint>\
+             </model></sdf>"
+        ),
+    )
+    .unwrap();
+    let (imp, _) = import_file(&d.join("nested.sdf"), "nested.sdf", Format::Sdf)
+        .unwrap_or_else(|e| panic!("{}", e.render()));
+    let bodies: Vec<&str> = imp.bodies.iter().map(|b| b.name.as_str()).collect();
+    assert_eq!(
+        bodies,
+        ["base", "arm__upper", "arm__lower", "arm__hand__palm"]
+    );
+    let coords: Vec<&str> = imp.coordinates.iter().map(|c| c.name.as_str()).collect();
+    assert_eq!(coords, ["shoulder", "arm__elbow", "arm__wrist"]);
+    std::fs::write(d.join("m.toml"), "sdf = \"nested.sdf\"\n").unwrap();
+    let m = model_at(&d.join("m.toml"));
+    let (x, y, z) = ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]);
+    let t = |p: [f64; 3]| (p, rot(z, 0.0));
+    let mut worst = 0.0f64;
+    for (s, e, w) in [(0.0, 0.0, 0.0), (0.7, -1.1, 0.4), (-2.0, 0.5, 2.9)] {
+        let at = [("shoulder", s), ("arm__elbow", e), ("arm__wrist", w)];
+        let arm = ([0.1, 0.0, 0.2], rot(z, 0.5));
+        let upper = compose(&compose(&arm, &t([0.0, 0.0, 0.1])), &([0.0; 3], rot(z, s)));
+        let lower = compose(
+            &compose(&upper, &t([0.3, 0.0, 0.0])),
+            &([0.0; 3], rot(y, e)),
+        );
+        let hand = compose(&lower, &([0.2, 0.0, 0.0], rot(x, 0.4)));
+        // The wrist's axis: x of arm's frame, in the palm's axes at zero (hand turned 0.4
+        // about x of lower, lower's axes arm's): still x.
+        let palm = compose(
+            &compose(&hand, &t([0.0, 0.05, 0.0])),
+            &([0.0; 3], rot(x, w)),
+        );
+        for (name, want) in [
+            ("arm__upper", upper),
+            ("arm__lower", lower),
+            ("arm__hand__palm", palm),
+        ] {
+            worst = worst.max(frame_gap(&frame_at(&m, name, &at), &want));
+        }
+    }
+    println!("nested models: link frames against the oracle, worst {worst:e}");
+    assert!(worst < 1e-14, "worst {worst:e}");
+}
+
+/// `<include>`: the included file's `<model>` in the `<include>`'s place, a nested model named by
+/// `<include><name>` (else its own name) and placed by `<include><pose>` (else its own). One
+/// arm file included twice (a relative path and `file://`), as `left` and `right`; a gripper by
+/// `model://gripper`, found in the source's directory through its `model.config`. Every link's
+/// world frame is the product of the poses, computed here; the source's hash covers the included
+/// files (an edit of the arm's file changes it).
+#[test]
+fn sdf_includes_are_nested_models() {
+    use rbss_codegen::import::{Format, import_file};
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let inertial = "<inertial><mass>1</mass><inertia><ixx>0.01</ixx><iyy>0.01</iyy>\
+                    <izz>0.01</izz></inertia></inertial>";
+    std::fs::create_dir_all(d.join("parts")).unwrap();
+    std::fs::create_dir_all(d.join("gripper")).unwrap();
+    let arm = format!(
+        "<sdf version=\"1.9\"><model name=\"arm\">\
+         <link name=\"upper\"><pose>0 0 0.1 0 0 0</pose>{inertial}</link>\
+         <link name=\"lower\"><pose relative_to=\"upper\">0.3 0 0 0 0 0</pose>{inertial}</link>\
+         <joint name=\"elbow\" type=\"revolute\"><parent>upper</parent><child>lower</child>\
+         <axis><xyz>0 1 0</xyz></axis></joint></model></sdf>"
+    );
+    std::fs::write(d.join("parts/arm.sdf"), &arm).unwrap();
+    std::fs::write(
+        d.join("gripper/model.config"),
+        "<?xml version=\"1.0\"?><model><name>gripper</name><sdf version=\"1.9\">g.sdf</sdf></model>",
+    )
+    .unwrap();
+    std::fs::write(
+        d.join("gripper/g.sdf"),
+        format!(
+            "<sdf version=\"1.9\"><model name=\"gripper\"><pose>0.5 0 0.3 0 0 0</pose>\
+             <link name=\"finger\">{inertial}</link></model></sdf>"
+        ),
+    )
+    .unwrap();
+    let abs = d.join("parts/arm.sdf").display().to_string();
+    std::fs::write(
+        d.join("robot.sdf"),
+        format!(
+            "<sdf version=\"1.9\"><model name=\"robot\">\
+             <link name=\"base\">{inertial}</link>\
+             <joint name=\"fix\" type=\"fixed\"><parent>world</parent><child>base</child></joint>\
+             <include><uri>parts/arm.sdf</uri><name>left</name><pose>0 0.2 0 0 0 0</pose></include>\
+             <include><uri>file://{abs}</uri><name>right</name><pose>0 -0.2 0 0 0 0</pose></include>\
+             <include><uri>model://gripper</uri></include>\
+             <joint name=\"shoulder_l\" type=\"revolute\"><parent>base</parent><child>left::upper</child>\
+             <axis><xyz>0 0 1</xyz></axis></joint>\
+             <joint name=\"shoulder_r\" type=\"revolute\"><parent>base</parent><child>right::upper</child>\
+             <axis><xyz>0 0 1</xyz></axis></joint>\
+             <joint name=\"grip\" type=\"fixed\"><parent>left::lower</parent><child>gripper::finger</child></joint>\
+             </model></sdf>"
+        ),
+    )
+    .unwrap();
+    let (imp, _) = import_file(&d.join("robot.sdf"), "robot.sdf", Format::Sdf)
+        .unwrap_or_else(|e| panic!("{}", e.render()));
+    let mut bodies: Vec<&str> = imp.bodies.iter().map(|b| b.name.as_str()).collect();
+    bodies.sort();
+    assert_eq!(
+        bodies,
+        [
+            "base",
+            "gripper__finger",
+            "left__lower",
+            "left__upper",
+            "right__lower",
+            "right__upper"
+        ]
+    );
+    let hash = imp.source.as_ref().unwrap().sha256.clone();
+    std::fs::write(d.join("m.toml"), "sdf = \"robot.sdf\"\n").unwrap();
+    let m = model_at(&d.join("m.toml"));
+    let (y, z) = ([0.0, 1.0, 0.0], [0.0, 0.0, 1.0]);
+    let t = |p: [f64; 3]| (p, rot(z, 0.0));
+    let mut worst = 0.0f64;
+    for q in [[0.0; 4], [0.7, -1.1, 0.4, 2.0], [-2.0, 0.5, 2.9, -0.3]] {
+        let at = [
+            ("shoulder_l", q[0]),
+            ("left__elbow", q[1]),
+            ("shoulder_r", q[2]),
+            ("right__elbow", q[3]),
+        ];
+        let mut want = Vec::new();
+        for (side, at_y, s, e) in [("left", 0.2, q[0], q[1]), ("right", -0.2, q[2], q[3])] {
+            let upper = compose(&t([0.0, at_y, 0.1]), &([0.0; 3], rot(z, s)));
+            let lower = compose(
+                &compose(&upper, &t([0.3, 0.0, 0.0])),
+                &([0.0; 3], rot(y, e)),
+            );
+            if side == "left" {
+                // The finger at (0.5, 0, 0.3) as written, carried by the left lower arm from
+                // its place at zero, (0.3, 0.2, 0.1).
+                let finger = compose(&lower, &t([0.2, -0.2, 0.2]));
+                want.push(("gripper__finger".to_string(), finger));
+            }
+            want.push((format!("{side}__upper"), upper));
+            want.push((format!("{side}__lower"), lower));
+        }
+        for (name, w) in &want {
+            worst = worst.max(frame_gap(&frame_at(&m, name, &at), w));
+        }
+    }
+    println!("included models: link frames against the oracle, worst {worst:e}");
+    assert!(worst < 1e-14, "worst {worst:e}");
+
+    std::fs::write(
+        d.join("parts/arm.sdf"),
+        arm.replace("0.3 0 0 0 0 0", "0.35 0 0 0 0 0"),
+    )
+    .unwrap();
+    let (edited, _) = import_file(&d.join("robot.sdf"), "robot.sdf", Format::Sdf)
+        .unwrap_or_else(|e| panic!("{}", e.render()));
+    assert_ne!(edited.source.unwrap().sha256, hash);
+    assert_eq!(
+        rbss_codegen::import::sdf_included_files(
+            &d.join("robot.sdf"),
+            &std::fs::read_to_string(d.join("robot.sdf")).unwrap()
+        )
+        .len(),
+        3
+    );
+
+    // A `model://` that resolves nowhere: one error at the `<uri>`, naming where it looked.
+    std::fs::write(
+        d.join("lost.sdf"),
+        "<sdf version=\"1.9\"><model name=\"lost\"><link name=\"a\"/>\
+         <include><uri>model://nowhere_to_be_found</uri></include></model></sdf>",
+    )
+    .unwrap();
+    let err = import_file(&d.join("lost.sdf"), "lost.sdf", Format::Sdf).unwrap_err();
+    let text = err.render();
+    assert!(
+        text.contains("cannot resolve `model://nowhere_to_be_found`")
+            && text.contains("nowhere_to_be_found")
+            && text.contains("GZ_SIM_RESOURCE_PATH"),
+        "{text}"
+    );
+}

@@ -213,6 +213,7 @@ pub fn import_renamed(
     // MJCF's `<include>`s: every file read (and checked) before the walk.
     let includes = match format {
         Format::Mjcf => mjcf::includes(path, shown, &text)?,
+        Format::Sdf => sdf::includes(path, shown, &text)?,
         _ => Vec::new(),
     };
     let mut cx = xml::Cx::new(shown, &text);
@@ -240,7 +241,14 @@ pub fn import_renamed(
                 path.parent().unwrap_or(Path::new("")),
             )
         }
-        Format::Sdf => sdf::import(&mut cx, &doc),
+        Format::Sdf => {
+            let roots: Vec<(&str, roxmltree::Node<'_, '_>)> = includes
+                .iter()
+                .zip(&docs)
+                .map(|((key, _, _), d)| (key.as_str(), d.root_element()))
+                .collect();
+            sdf::import(&mut cx, &doc, &roots)
+        }
     };
     let extra: Vec<String> = cx.included().iter().map(|t| t.to_string()).collect();
     *renames = std::mem::take(&mut cx.renames);
@@ -293,6 +301,13 @@ pub fn import_renamed(
         sha256: sha256_hex(hashed.as_bytes()),
     });
     Ok((imported, warnings))
+}
+
+/// The files an SDF source's `<include>`s name (transitively, each `<uri>` resolved as the
+/// importer resolves it), for the cache key of a model file that names the source: a file that
+/// cannot be read is left out (the import reports it).
+pub fn sdf_included_files(path: &Path, text: &str) -> Vec<std::path::PathBuf> {
+    sdf::included_files(path, text)
 }
 
 /// The text of an XML file, or a located error (unreadable, too large, not UTF-8).

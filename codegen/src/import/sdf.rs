@@ -5,27 +5,34 @@
 //! | `<link>` with `<pose relative_to>` (the model's frame by default) | a `[[body]]`: its pose relative to its parent link, `inverse(parent's pose) * its pose`, folded at generation |
 //! | `<joint type="revolute\|continuous\|prismatic">` that brings a link into the tree | a coordinate: the child's steps go to the joint's frame (`<pose>`, the child's frame by default), move about `<axis><xyz>`, and back |
 //! | `<joint type="ball">` in the tree | three coordinates `NAME_x`, `NAME_y`, `NAME_z` (`Rx Ry Rz` about the joint's origin) |
+//! | `<joint type="universal\|revolute2">` in the tree | two coordinates `NAME_1`, `NAME_2`: the turn about `<axis>`, then about `<axis2>` as turned by the first (SDFormat: "two revolute joints connected in series", both axes in the joint's frame), i.e. `J R(axis, q1) R(axis2, q2) J⁻¹`; parallel axes refused |
+//! | `<joint type="screw">` in the tree | one coordinate, the angle `q` about `<axis>`, and the translation along it: `<screw_thread_pitch>` p (m per revolution, right-handed positive) `p q / (2 pi)`, else the deprecated `<thread_pitch>` t (rad/m, left-handed positive) `-q / t` ([`screw_lead`]) |
+//! | `<axis><xyz expressed_in>`, `<axis2>` | the vector turned from the named frame into the joint's |
 //! | `<joint type="fixed">` in the tree | the child's steps only |
 //! | a joint whose child is already in the tree | a loop at the joint's frame: `ball` (ball), `hinge` (revolute, about the axis), `weld` (fixed) |
-//! | a `prismatic` joint whose child is already in the tree | the prismatic joint brings the child in (a coordinate), and the joint that brought it in closes the loop instead (as above); refused when that joint is prismatic too, or when the loop hangs below the child (a note says which joint closes) |
+//! | a `prismatic`, `universal`, `revolute2` or `screw` joint whose child is already in the tree (no loop kind is such a joint) | it brings the child in (its coordinates), and the joint that brought it in closes the loop instead (as above); refused when that joint is not revolute, ball or fixed, or when the loop hangs below the child (a note says which joint closes) |
 //! | `<joint type="gearbox">` (`<gearbox_ratio>` r, `<gearbox_reference_body>` R, `<axis>`, `<axis2>`) | a `coupling` loop named after the joint: SDFormat's `theta_2 = -r theta_1`, `theta_1` the parent link's angle against R about `<axis>`, `theta_2` the child's about `<axis2>`, i.e. `q2 = -r s1 s2 q1` between the revolute joints of the tree that join parent and child to R (`s = ±1`: the joint's axis along or against the gearbox's, the joint from R to the link or back); `q2` is not actuated |
 //! | `<frame>` | a frame `relative_to` may name |
+//! | `<include>` (`<uri>`: a path, `file://`, `model://NAME` in [`MODEL_PATH_VARS`]' directories and the file's; `<name>`, `<pose>`) | the included file's `<model>` as a nested model in its place ([`includes`], [`register_includes`]) |
+//! | a nested `<model>` (any depth) | its links, joints and frames, scoped: `inner::link` from outside, `link` inside, `__model__` its own frame ([`scope_of`], [`resolve`]); its `<pose>` relative to the model around it |
 //! | `<inertial>` (`<pose>`, `<mass>`, `<inertia>`) | `mass`, `com`, `inertia` (in the link's axes) |
 //! | `<axis><dynamics>` `damping`, `spring_stiffness`, `spring_reference` | `damping`, `stiffness`, `rest` (`friction` ignored, with a warning) |
 //! | `<world><gravity>` | `gravity` |
 //!
 //! | a `<link>` that is the child of no joint (the model's root: a floating base) | a free joint `LINK_free`: 7 coordinates `LINK_free_x`, `_y`, `_z`, `LINK_free_qw`, `_qx`, `_qy`, `_qz` that move the link from its pose as written (home: zero and `(1, 0, 0, 0)`) |
 //!
-//! Refused: `universal`, `revolute2` and `screw` joints; a prismatic joint closing a loop that
-//! no other joint of it can close; a gearbox whose links are not turned against its reference
-//! body by revolute joints of the tree about its axes.
+//! Refused: a prismatic, universal, revolute2 or screw joint closing a loop that no other joint
+//! of it can close; a gearbox whose links are not turned against its reference body by revolute
+//! joints of the tree about its axes; an `<include>` whose `<uri>` names no local file.
 
+use std::cell::RefCell;
 use std::collections::HashMap;
+use std::path::{Path, PathBuf};
 
 use roxmltree::{Document, Node};
 
 use super::geom::{self, Mat};
-use super::xml::{Cx, child, children, element};
+use super::xml::{Cx, child, element};
 use super::{
     BodyOut, Coord, Imported, LoopOut, Origin, fnum, ident, joint_steps, number, quote, unit,
 };
@@ -49,14 +56,326 @@ fn origin_abs() -> Abs {
     }
 }
 
+/// Joints no loop kind expresses: one that closes a loop brings its child into the tree instead,
+/// and the joint that brought the child in closes the loop ([`tree`]).
+const CUT_ELSEWHERE: [&str; 4] = ["prismatic", "universal", "revolute2", "screw"];
+
 struct Frames<'a, 'i> {
-    /// name -> (element, kind: "link", "joint" or "frame").
-    nodes: HashMap<&'a str, Node<'a, 'i>>,
+    /// Scoped name (`inner::link`) -> a `<link>`, `<joint>`, `<frame>` or nested `<model>`.
+    nodes: HashMap<String, Node<'a, 'i>>,
     done: HashMap<String, Option<Abs>>,
     visiting: Vec<String>,
 }
 
-pub(super) fn import(cx: &mut Cx<'_>, doc: &Document<'_>) -> Option<Imported> {
+/// An `<include>` and the `<model>` of the file it names.
+type Included<'a, 'i> = (Node<'a, 'i>, Node<'a, 'i>);
+
+thread_local! {
+    /// The included files being imported, by their text's address: the scope the `<include>` is
+    /// written in (`"arm::"`) and the included model's name there (`<include><name>`, else the
+    /// model's own).
+    static INCLUDED: RefCell<HashMap<usize, (String, String)>> = RefCell::new(HashMap::new());
+}
+
+/// The included file's scope and name of an element's document, if it is an included one.
+fn included_as(n: Node<'_, '_>) -> Option<(String, String)> {
+    let key = n.document().input_text().as_ptr() as usize;
+    INCLUDED.with(|m| m.borrow().get(&key).cloned())
+}
+
+/// Whether `n` is the `<model>` of an included file.
+fn is_included_root(n: Node<'_, '_>) -> bool {
+    n.tag_name().name() == "model"
+        && n.parent_element()
+            .is_none_or(|o| o.tag_name().name() != "model")
+        && included_as(n).is_some()
+}
+
+/// The environment variables whose directories `model://NAME` is searched in, in order (then the
+/// including file's directory): libsdformat's `SDF_PATH`, Gazebo's `GZ_SIM_RESOURCE_PATH` (and
+/// `IGN_GAZEBO_RESOURCE_PATH` before it), Gazebo classic's `GAZEBO_MODEL_PATH`.
+pub(crate) const MODEL_PATH_VARS: [&str; 4] = [
+    "SDF_PATH",
+    "GZ_SIM_RESOURCE_PATH",
+    "IGN_GAZEBO_RESOURCE_PATH",
+    "GAZEBO_MODEL_PATH",
+];
+
+/// The file an `<include>`'s `<uri>` names, from a file in `dir`: a path (relative to `dir`),
+/// `file://PATH`, or `model://NAME[/...]` searched in the directories of [`MODEL_PATH_VARS`]
+/// and `dir`. A directory is a model's: the file its `model.config`'s `<sdf>` names, else
+/// `model.sdf`. Else the places looked at (none for a URI that is no local file).
+fn resolve_uri(uri: &str, dir: &Path) -> Result<PathBuf, Vec<PathBuf>> {
+    let uri = uri.trim();
+    let candidates: Vec<PathBuf> = if let Some(rest) = uri.strip_prefix("model://") {
+        let mut dirs: Vec<PathBuf> = Vec::new();
+        for var in MODEL_PATH_VARS {
+            if let Some(v) = std::env::var_os(var) {
+                dirs.extend(std::env::split_paths(&v).filter(|d| !d.as_os_str().is_empty()));
+            }
+        }
+        dirs.push(dir.to_path_buf());
+        dirs.iter().map(|d| d.join(rest)).collect()
+    } else if let Some(rest) = uri.strip_prefix("file://") {
+        vec![dir.join(rest)]
+    } else if uri.contains("://") {
+        return Err(Vec::new());
+    } else {
+        vec![dir.join(uri)]
+    };
+    for c in &candidates {
+        if c.is_file() {
+            return Ok(c.clone());
+        }
+        if c.is_dir() {
+            let named = std::fs::read_to_string(c.join("model.config"))
+                .ok()
+                .and_then(|t| {
+                    Document::parse(&t).ok().and_then(|d| {
+                        d.descendants()
+                            .find(|n| n.has_tag_name("sdf"))
+                            .and_then(|n| n.text())
+                            .map(|t| c.join(t.trim()))
+                    })
+                });
+            for f in named.into_iter().chain([c.join("model.sdf")]) {
+                if f.is_file() {
+                    return Ok(f);
+                }
+            }
+        }
+    }
+    Err(candidates)
+}
+
+/// The `<include>` elements of an SDF text and their `<uri>`s, with the element's offset.
+fn include_uris(text: &str) -> Vec<(usize, String)> {
+    let opts = roxmltree::ParsingOptions {
+        allow_dtd: false,
+        nodes_limit: super::MAX_NODES,
+        ..Default::default()
+    };
+    let Ok(doc) = Document::parse_with_options(text, opts) else {
+        return Vec::new();
+    };
+    doc.descendants()
+        .filter(|n| n.is_element() && n.tag_name().name() == "include")
+        .map(|n| {
+            let uri = child(n, "uri").and_then(|u| u.text()).unwrap_or("");
+            (n.range().start, uri.trim().to_string())
+        })
+        .collect()
+}
+
+/// Every file an SDF source includes, transitively (those that resolve and read).
+pub(super) fn included_files(path: &Path, text: &str) -> Vec<PathBuf> {
+    let mut out: Vec<PathBuf> = Vec::new();
+    let mut queue = vec![(path.to_path_buf(), text.to_string())];
+    let mut i = 0;
+    while i < queue.len() && out.len() < MAX_INCLUDES {
+        let (from, t) = queue[i].clone();
+        i += 1;
+        let dir = from.parent().unwrap_or(Path::new("")).to_path_buf();
+        for (_, uri) in include_uris(&t) {
+            if let Ok(p) = resolve_uri(&uri, &dir)
+                && out.len() < MAX_INCLUDES
+                && let Ok(b) = std::fs::read_to_string(&p)
+            {
+                out.push(p.clone());
+                queue.push((p, b));
+            }
+        }
+    }
+    out
+}
+
+/// At most this many included files (each inclusion counts: a model included twice is read
+/// twice, as two models).
+const MAX_INCLUDES: usize = 64;
+
+/// The files the source's `<include>`s name, transitively, each inclusion once, in breadth-first
+/// order: `(key, path as shown, text)`, the key the including file's shown path and the
+/// `<include>`'s byte offset. A `<uri>` that resolves to no file is an error at it that names the
+/// places looked at; a file that includes itself (through others) is refused.
+pub(super) fn includes(
+    path: &Path,
+    shown: &str,
+    text: &str,
+) -> Result<Vec<(String, String, String)>, crate::diagnostics::Diagnostics> {
+    let mut out: Vec<(String, String, String)> = Vec::new();
+    // (path, shown, text, the files including it)
+    let mut queue: Vec<(PathBuf, String, String, Vec<PathBuf>)> = vec![(
+        path.to_path_buf(),
+        shown.to_string(),
+        text.to_string(),
+        Vec::new(),
+    )];
+    let mut i = 0;
+    while i < queue.len() {
+        let (from, from_shown, from_text, chain) = queue[i].clone();
+        i += 1;
+        let uris = include_uris(&from_text);
+        if uris.is_empty() {
+            continue;
+        }
+        let doc = Document::parse_with_options(
+            &from_text,
+            roxmltree::ParsingOptions {
+                allow_dtd: false,
+                nodes_limit: super::MAX_NODES,
+                ..Default::default()
+            },
+        )
+        .ok();
+        let Some(doc) = doc else { continue };
+        let mut cx = Cx::new(&from_shown, &from_text);
+        let dir = from.parent().unwrap_or(Path::new("")).to_path_buf();
+        for inc in doc
+            .descendants()
+            .filter(|n| n.is_element() && n.tag_name().name() == "include")
+        {
+            let Some(u) = child(inc, "uri") else {
+                cx.error(&cx.tag(inc), "the `<include>` has no `<uri>`", "", "");
+                continue;
+            };
+            let uri = u.text().unwrap_or("").trim();
+            let at = u.first_child().map_or_else(|| cx.tag(u), |c| c.range());
+            let p = match resolve_uri(uri, &dir) {
+                Ok(p) => p,
+                Err(looked) => {
+                    let places: Vec<String> =
+                        looked.iter().map(|p| p.display().to_string()).collect();
+                    cx.error(
+                        &at,
+                        format!("cannot resolve `{uri}`"),
+                        if places.is_empty() {
+                            "not a local file"
+                        } else {
+                            "no such file or model directory"
+                        },
+                        &if places.is_empty() {
+                            "only local files are read: a path (relative to this file), \
+                             `file://PATH` or `model://NAME`"
+                                .to_string()
+                        } else {
+                            format!(
+                                "looked at {}{}",
+                                places.join(", "),
+                                if uri.starts_with("model://") {
+                                    " (`model://` is searched in the directories of SDF_PATH, \
+                                     GZ_SIM_RESOURCE_PATH, IGN_GAZEBO_RESOURCE_PATH, \
+                                     GAZEBO_MODEL_PATH, then this file's)"
+                                } else {
+                                    ""
+                                }
+                            )
+                        },
+                    );
+                    continue;
+                }
+            };
+            let same = |a: &Path, b: &Path| {
+                a == b
+                    || a.canonicalize()
+                        .is_ok_and(|x| b.canonicalize().is_ok_and(|y| x == y))
+            };
+            if same(&p, &from) || chain.iter().any(|c| same(&p, c.as_path())) {
+                cx.error(
+                    &at,
+                    format!("`{uri}` includes the file that includes it"),
+                    "an endless inclusion",
+                    "",
+                );
+                continue;
+            }
+            if out.len() >= MAX_INCLUDES {
+                cx.error(&at, "more than 64 included models", "", "");
+                break;
+            }
+            let p_shown = p.display().to_string().replace('\\', "/");
+            match super::read_xml(&p, &p_shown) {
+                Ok(t) => {
+                    let mut up = chain.clone();
+                    up.push(from.clone());
+                    queue.push((p.clone(), p_shown.clone(), t.clone(), up));
+                    out.push((format!("{from_shown}@{}", inc.range().start), p_shown, t));
+                }
+                Err(e) => {
+                    let why = e.items.first().map_or(String::new(), |d| d.message.clone());
+                    cx.error(&at, format!("cannot include `{p_shown}`: {why}"), "", "");
+                }
+            }
+        }
+        if let (Some(errors), _) = cx.finish() {
+            return Err(errors);
+        }
+    }
+    Ok(out)
+}
+
+/// The `<include>`s of `model` and of the models in it, each with the `<model>` of its file
+/// (registered in [`INCLUDED`] with its scope and name, outer ones first).
+fn register_includes<'a, 'i>(
+    cx: &mut Cx<'_>,
+    model: Node<'a, 'i>,
+    roots: &[(&str, Node<'a, 'i>)],
+    out: &mut Vec<Included<'a, 'i>>,
+) {
+    for n in model.children().filter(|n| n.is_element()) {
+        match n.tag_name().name() {
+            "model" => register_includes(cx, n, roots, out),
+            "include" => {
+                let key = format!("{}@{}", cx.path_of(n), n.range().start);
+                let Some(&(_, root)) = roots.iter().find(|(k, _)| *k == key) else {
+                    continue;
+                };
+                let m = child(root, "model")
+                    .or_else(|| child(root, "world").and_then(|w| child(w, "model")));
+                let Some(m) = m else {
+                    cx.error(&cx.tag(n), "the included file has no `<model>`", "", "");
+                    continue;
+                };
+                if let Some(pf) = child(n, "placement_frame") {
+                    cx.error(
+                        &cx.tag(pf),
+                        "`<placement_frame>` is not supported",
+                        "not read",
+                        "give the `<include>`'s `<pose>` of the model's frame",
+                    );
+                }
+                let name = child(n, "name")
+                    .and_then(|e| e.text())
+                    .map(str::trim)
+                    .or(m.attribute("name"))
+                    .unwrap_or("")
+                    .to_string();
+                let key = m.document().input_text().as_ptr() as usize;
+                let scope = scope_of(n);
+                INCLUDED.with(|r| r.borrow_mut().insert(key, (scope, name)));
+                out.push((n, m));
+                register_includes(cx, m, roots, out);
+            }
+            _ => {}
+        }
+    }
+}
+
+pub(super) fn import<'a, 'i>(
+    cx: &mut Cx<'_>,
+    doc: &'a Document<'i>,
+    roots: &[(&str, Node<'a, 'i>)],
+) -> Option<Imported> {
+    INCLUDED.with(|r| r.borrow_mut().clear());
+    let out = import_model(cx, doc, roots);
+    INCLUDED.with(|r| r.borrow_mut().clear());
+    out
+}
+
+fn import_model<'a, 'i>(
+    cx: &mut Cx<'_>,
+    doc: &'a Document<'i>,
+    roots: &[(&str, Node<'a, 'i>)],
+) -> Option<Imported> {
     let root = doc.root_element();
     if root.tag_name().name() != "sdf" {
         cx.error(
@@ -104,18 +423,11 @@ pub(super) fn import(cx: &mut Cx<'_>, doc: &Document<'_>) -> Option<Imported> {
     {
         out.gravity = [0, 1, 2].map(|k| number(&g[k].0, g[k].1));
     }
-    for inc in children(model, "include").chain(children(model, "model")) {
-        cx.error(
-            &cx.tag(inc),
-            "nested and included models are not supported",
-            "not read",
-            "",
-        );
-    }
-
-    let links: Vec<Node<'_, '_>> = children(model, "link").collect();
-    let joints: Vec<Node<'_, '_>> = children(model, "joint").collect();
-    let mut frames = frames(cx, model, &links, &joints);
+    let mut inc = Vec::new();
+    register_includes(cx, model, roots, &mut inc);
+    let links = nested(model, "link", &inc);
+    let joints = nested(model, "joint", &inc);
+    let mut frames = frames(cx, model, &links, &joints, &inc);
     let (tree, closing, floating) = tree(cx, &links, &joints, &mut out);
     for &l in &floating {
         free_root(cx, &mut frames, l, &mut out);
@@ -132,6 +444,7 @@ fn frames<'a, 'i>(
     model: Node<'a, 'i>,
     links: &[Node<'a, 'i>],
     joints: &[Node<'a, 'i>],
+    inc: &[Included<'a, 'i>],
 ) -> Frames<'a, 'i> {
     let mut frames = Frames {
         nodes: HashMap::new(),
@@ -141,12 +454,22 @@ fn frames<'a, 'i>(
     for n in links
         .iter()
         .chain(joints)
-        .chain(children(model, "frame").collect::<Vec<_>>().iter())
+        .chain(nested(model, "frame", inc).iter())
+        .chain(nested(model, "model", inc).iter())
     {
-        let Some(name) = cx.required(*n, "name") else {
+        let Some(local) = cx.required(*n, "name") else {
             continue;
         };
-        if frames.nodes.insert(name, *n).is_some() || name == "world" || name == "__model__" {
+        let name = qname(*n);
+        // An included model is placed by the `<include>`'s `<pose>` when it has one.
+        let placed = match inc.iter().find(|(_, m)| m == n) {
+            Some((i, _)) if child(*i, "pose").is_some() => *i,
+            _ => *n,
+        };
+        if frames.nodes.insert(name.clone(), placed).is_some()
+            || local == "world"
+            || local == "__model__"
+        {
             cx.error(
                 &cx.attr_range(*n, "name"),
                 format!("frame name `{name}` is taken"),
@@ -159,14 +482,104 @@ fn frames<'a, 'i>(
     frames
 }
 
-/// A joint's parent and child link, as written.
+/// The elements `tag` of `model` and of the models nested in it (SDFormat 1.8: `<model>` in a
+/// `<model>`) or included (`<include>`: the included file's `<model>` in its place), in the
+/// file's order.
+fn nested<'a, 'i>(model: Node<'a, 'i>, tag: &str, inc: &[Included<'a, 'i>]) -> Vec<Node<'a, 'i>> {
+    let mut out = Vec::new();
+    for n in model.children().filter(|n| n.is_element()) {
+        let inner = match n.tag_name().name() {
+            "model" => Some(n),
+            "include" => inc.iter().find(|(i, _)| *i == n).map(|(_, m)| *m),
+            _ => None,
+        };
+        if n.tag_name().name() == tag {
+            out.push(n);
+        }
+        if let Some(m) = inner {
+            if tag == "model" && m != n {
+                out.push(m);
+            }
+            out.extend(nested(m, tag, inc));
+        }
+    }
+    out
+}
+
+/// The scope an element is written in: the names of the models nested in the imported one
+/// around it, each followed by `::` (`""` in the imported model itself).
+fn scope_of(n: Node<'_, '_>) -> String {
+    if is_included_root(n) {
+        return included_as(n).map(|(scope, _)| scope).unwrap_or_default();
+    }
+    let mut names = Vec::new();
+    let mut base = String::new();
+    let mut up = n.parent_element();
+    while let Some(m) = up {
+        let outer = m.parent_element();
+        if m.tag_name().name() == "model" {
+            if outer.is_none_or(|o| o.tag_name().name() != "model") {
+                // The file's model: the imported one, or an included one (named by its include).
+                if let Some((scope, name)) = included_as(m) {
+                    names.push(name);
+                    base = scope;
+                }
+                break;
+            }
+            names.push(m.attribute("name").unwrap_or("").to_string());
+        }
+        up = outer;
+    }
+    let inner: String = names.iter().rev().map(|s| format!("{s}::")).collect();
+    format!("{base}{inner}")
+}
+
+/// An element's scoped name: `inner::link` for a link of the nested model `inner`.
+fn qname(n: Node<'_, '_>) -> String {
+    if is_included_root(n) {
+        let (scope, name) = included_as(n).unwrap_or_default();
+        return format!("{scope}{name}");
+    }
+    format!("{}{}", scope_of(n), n.attribute("name").unwrap_or(""))
+}
+
+/// A frame name written in element `n`'s scope, scoped: SDFormat's names are relative to the
+/// model they are written in (`inner::link` from outside `inner`, `link` inside it); `world` is
+/// the world, `__model__` the model the element is written in.
+fn resolve(n: Node<'_, '_>, name: &str) -> String {
+    let scope = scope_of(n);
+    match name {
+        "world" => "world".into(),
+        "__model__" if scope.is_empty() => "__model__".into(),
+        "__model__" => scope.trim_end_matches("::").to_string(),
+        _ => format!("{scope}{name}"),
+    }
+}
+
+/// The help of an unknown name written in a nested model: names there are its own.
+fn scope_help(n: Node<'_, '_>, scoped: &str) -> String {
+    let scope = scope_of(n);
+    if scope.is_empty() {
+        String::new()
+    } else {
+        format!(
+            "written in model `{}`, this names `{scoped}`: a nested model's names are its own \
+             (SDFormat's scopes; a model reaches into a nested one with `model::name`, not out)",
+            scope.trim_end_matches("::")
+        )
+    }
+}
+
+/// A joint's parent and child link, scoped.
 fn ends(j: Node<'_, '_>) -> (String, String) {
     let get = |t: &str| {
-        child(j, t)
-            .and_then(|e| e.text())
-            .map(str::trim)
-            .unwrap_or("")
-            .to_string()
+        resolve(
+            j,
+            child(j, t)
+                .and_then(|e| e.text())
+                .map(str::trim)
+                .unwrap_or(""),
+        )
     };
     (get("parent"), get("child"))
 }
@@ -179,12 +592,12 @@ fn free_root<'a, 'i>(
     l: Node<'a, 'i>,
     out: &mut Imported,
 ) {
-    let name = l.attribute("name").unwrap_or("");
-    let Some(abs) = abs_of(cx, frames, name) else {
+    let name = qname(l);
+    let Some(abs) = abs_of(cx, frames, &name) else {
         return;
     };
     let origin = cx.origin(l);
-    let body = cx.body_name(name);
+    let body = cx.body_name(&name);
     let (coords, step) = super::free_joint(&format!("{body}_free"), &origin);
     out.coordinates.extend(coords);
     let mut transforms = abs.steps.clone();
@@ -225,12 +638,13 @@ fn tree<'a, 'i>(
                 ),
                 Some(e) => {
                     let l = e.text().unwrap_or("").trim();
-                    if l != "world" && !links.iter().any(|k| k.attribute("name") == Some(l)) {
+                    let scoped = resolve(j, l);
+                    if scoped != "world" && !links.iter().any(|k| qname(*k) == scoped) {
                         cx.error(
                             &e.first_child().map_or_else(|| cx.tag(e), |c| c.range()),
                             format!("unknown link `{l}`"),
                             "no `<link>` of this name",
-                            "",
+                            &scope_help(j, &scoped),
                         );
                     }
                 }
@@ -249,12 +663,12 @@ fn tree<'a, 'i>(
         .iter()
         .copied()
         .filter(|l| {
-            let name = l.attribute("name").unwrap_or("");
+            let name = qname(*l);
             !joints.iter().any(|&j| ends(j).1 == name)
         })
         .collect();
     for l in &floating {
-        in_tree.insert(l.attribute("name").unwrap_or("").to_string(), None);
+        in_tree.insert(qname(*l), None);
     }
     let mut tree = Vec::new();
     let mut closing = Vec::new();
@@ -288,8 +702,8 @@ fn tree<'a, 'i>(
         );
     }
     for &l in links {
-        let name = l.attribute("name").unwrap_or("");
-        if !in_tree.contains_key(name) {
+        let name = qname(l);
+        if !in_tree.contains_key(&name) {
             cx.error(
                 &cx.attr_range(l, "name"),
                 format!("link `{name}` is not tied to the world by a joint: it would float"),
@@ -299,21 +713,23 @@ fn tree<'a, 'i>(
         }
     }
 
-    // A prismatic joint closing a loop takes the place of the joint that brought its child in,
-    // which closes the loop instead (a hinge, ball or weld loop).
+    // A joint no loop kind expresses (prismatic, universal, revolute2, screw) closing a loop
+    // takes the place of the joint that brought its child in, which closes the loop instead (a
+    // hinge, ball or weld loop).
     let mut swapped = false;
     let mut refused = Vec::new();
     for slot in closing.iter_mut() {
         let j = *slot;
-        if j.attribute("type") != Some("prismatic") {
+        let kind = j.attribute("type").unwrap_or("");
+        if !CUT_ELSEWHERE.contains(&kind) {
             continue;
         }
         let (p, c) = ends(j);
-        let jname = j.attribute("name").unwrap_or("");
+        let jname = &qname(j);
         let Some(&Some(t)) = in_tree.get(&c) else {
             continue;
         };
-        let tname = t.attribute("name").unwrap_or("");
+        let tname = &qname(t);
         // Whether the prismatic joint's parent hangs below its child: then the whole loop does,
         // and no other joint of it can bring the child in.
         let mut up = p.clone();
@@ -330,12 +746,12 @@ fn tree<'a, 'i>(
             cx.error(
                 &cx.attr_range(j, "type"),
                 format!(
-                    "prismatic joint `{jname}` closes a loop that hangs below its own child `{c}`"
+                    "{kind} joint `{jname}` closes a loop that hangs below its own child `{c}`"
                 ),
                 "only this joint can close the loop",
                 &format!(
-                    "the model language has no prismatic loop: a loop through a prismatic joint is \
-                     imported with the prismatic joint as a coordinate and the loop closed at the \
+                    "the model language has no {kind} loop: a loop through a {kind} joint is \
+                     imported with the {kind} joint in the tree and the loop closed at the \
                      joint that brings the same link in; here `{p}` is reached through `{c}`, so \
                      `{c}` cannot be brought in by `{jname}`"
                 ),
@@ -347,12 +763,12 @@ fn tree<'a, 'i>(
             cx.error(
                 &cx.attr_range(j, "type"),
                 format!(
-                    "prismatic joint `{jname}` closes a loop whose other joint at `{c}`, \
+                    "{kind} joint `{jname}` closes a loop whose other joint at `{c}`, \
                      `{tname}`, is a `{t_kind}` joint"
                 ),
                 "cannot close the loop",
                 &format!(
-                    "the model language has no prismatic loop: the loop is closed at the joint \
+                    "the model language has no {kind} loop: the loop is closed at the joint \
                      that brings `{c}` into the tree, which must be a revolute, ball or fixed \
                      joint (a hinge, ball or weld loop)"
                 ),
@@ -365,8 +781,8 @@ fn tree<'a, 'i>(
         swapped = true;
         let (jn, tn) = (cx.joint_name(jname), cx.joint_name(tname));
         out.notes.push(format!(
-            "prismatic joint `{jn}` closes a loop: it is a coordinate, and the loop closes at \
-             joint `{tn}` instead"
+            "{kind} joint `{jn}` closes a loop: it brings `{c}` into the tree, and the loop \
+             closes at joint `{tn}` instead"
         ));
     }
     // Reported once, here: not again as a joint that cannot close a loop.
@@ -412,13 +828,10 @@ fn bodies<'a, 'i>(
 ) {
     for &j in tree {
         let (p, c) = ends(j);
-        let Some(&l) = links
-            .iter()
-            .find(|k| k.attribute("name") == Some(c.as_str()))
-        else {
+        let Some(&l) = links.iter().find(|k| qname(**k) == c) else {
             continue;
         };
-        let jname = cx.joint_name(j.attribute("name").unwrap_or(""));
+        let jname = cx.joint_name(&qname(j));
         let kind = j.attribute("type").unwrap_or("");
         let mut transforms = Vec::new();
         // A pose that failed is reported; the joint and the link are still checked.
@@ -437,7 +850,8 @@ fn bodies<'a, 'i>(
         };
         match kind {
             "fixed" => {}
-            "revolute" | "continuous" | "prismatic" | "ball" => {
+            "revolute" | "continuous" | "prismatic" | "ball" | "universal" | "revolute2"
+            | "screw" => {
                 transforms.extend(jpose.clone());
                 let mut coord = Coord {
                     name: jname.clone(),
@@ -445,39 +859,97 @@ fn bodies<'a, 'i>(
                     origin: cx.origin(j),
                     ..Coord::default()
                 };
-                dynamics(cx, j, &mut coord);
-                if kind == "ball" {
-                    let names: Vec<String> = ["x", "y", "z"]
-                        .iter()
-                        .map(|a| format!("{jname}_{a}"))
-                        .collect();
-                    transforms.push(format!(
-                        "{{ spherical = [{}] }}",
-                        names
+                dynamics(cx, j, "axis", &mut coord);
+                match kind {
+                    "ball" => {
+                        let names: Vec<String> = ["x", "y", "z"]
                             .iter()
-                            .map(|n| quote(n))
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    ));
-                    for n in &names {
-                        let mut cc = coord.clone();
-                        cc.name = n.clone();
-                        out.coordinates.push(cc);
+                            .map(|a| format!("{jname}_{a}"))
+                            .collect();
+                        transforms.push(format!(
+                            "{{ spherical = [{}] }}",
+                            names
+                                .iter()
+                                .map(|n| quote(n))
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ));
+                        for n in &names {
+                            let mut cc = coord.clone();
+                            cc.name = n.clone();
+                            out.coordinates.push(cc);
+                        }
+                        out.notes.push(format!(
+                            "ball joint `{jname}` is three coordinates {}: angles Rx Ry Rz",
+                            names.join(", ")
+                        ));
                     }
-                    out.notes.push(format!(
-                        "ball joint `{jname}` is three coordinates {}: angles Rx Ry Rz",
-                        names.join(", ")
-                    ));
-                } else {
-                    let Some(axis) = axis_of(cx, j) else { continue };
-                    let k = if kind == "prismatic" {
-                        "prismatic"
-                    } else {
-                        "revolute"
-                    };
-                    transforms.extend(joint_steps(k, &jname, axis));
-                    out.actuated.push(jname.clone());
-                    out.coordinates.push(coord);
+                    "universal" | "revolute2" => {
+                        let (a1, a2) = (
+                            axis_in(cx, frames, j, "axis"),
+                            axis_in(cx, frames, j, "axis2"),
+                        );
+                        let (Some(a1), Some(a2)) = (a1, a2) else {
+                            continue;
+                        };
+                        if (geom::dot(a1, a2).abs() - 1.0).abs() < 1e-9 {
+                            let x = child(j, "axis2").and_then(|a| child(a, "xyz")).unwrap_or(j);
+                            cx.error(
+                                &x.first_child().map_or_else(|| cx.tag(x), |c| c.range()),
+                                format!(
+                                    "the two axes of {kind} joint `{}` are parallel",
+                                    j.attribute("name").unwrap_or("")
+                                ),
+                                "along `<axis>` (either sign)",
+                                "the joint would turn twice about one line, one coordinate \
+                                 too many: a revolute joint turns about one axis",
+                            );
+                            continue;
+                        }
+                        let names = [format!("{jname}_1"), format!("{jname}_2")];
+                        transforms.extend(joint_steps("revolute", &names[0], a1));
+                        transforms.extend(joint_steps("revolute", &names[1], a2));
+                        let mut second = coord.clone();
+                        dynamics(cx, j, "axis2", &mut second);
+                        coord.name = names[0].clone();
+                        second.name = names[1].clone();
+                        out.notes.push(format!(
+                            "{kind} joint `{jname}` is two coordinates {}, {}: the angle about \
+                             `<axis>`, then about `<axis2>` (which turns with the first)",
+                            names[0], names[1]
+                        ));
+                        out.actuated.extend(names.iter().cloned());
+                        out.coordinates.push(coord);
+                        out.coordinates.push(second);
+                    }
+                    "screw" => {
+                        let Some(axis) = axis_of(cx, frames, j) else {
+                            continue;
+                        };
+                        let Some(lead) = screw_lead(cx, j, &jname) else {
+                            continue;
+                        };
+                        transforms.extend(screw_steps(&jname, &lead, axis));
+                        out.notes.push(format!(
+                            "screw joint `{jname}` is one coordinate: the angle about `<axis>`, \
+                             with the translation {lead} along it"
+                        ));
+                        out.actuated.push(jname.clone());
+                        out.coordinates.push(coord);
+                    }
+                    _ => {
+                        let Some(axis) = axis_of(cx, frames, j) else {
+                            continue;
+                        };
+                        let k = if kind == "prismatic" {
+                            "prismatic"
+                        } else {
+                            "revolute"
+                        };
+                        transforms.extend(joint_steps(k, &jname, axis));
+                        out.actuated.push(jname.clone());
+                        out.coordinates.push(coord);
+                    }
                 }
                 if !jpose.is_empty() {
                     transforms.push(format!("{{ inverse = [{}] }}", jpose.join(", ")));
@@ -488,7 +960,8 @@ fn bodies<'a, 'i>(
                     &cx.attr_range(j, "type"),
                     format!("a `{other}` joint cannot be imported"),
                     "not supported",
-                    "revolute, continuous, prismatic, ball and fixed joints are",
+                    "revolute, continuous, prismatic, ball, universal, revolute2, screw and \
+                     fixed joints are",
                 );
                 continue;
             }
@@ -527,7 +1000,7 @@ fn loops<'a, 'i>(
 ) {
     for &j in closing {
         let (p, c) = ends(j);
-        let name = cx.joint_name(j.attribute("name").unwrap_or(""));
+        let name = cx.joint_name(&qname(j));
         let kind = match j.attribute("type").unwrap_or("") {
             "ball" => "ball",
             "revolute" | "continuous" => "hinge",
@@ -544,7 +1017,7 @@ fn loops<'a, 'i>(
         };
         // The axis is checked even where a pose failed (reported already).
         let axis = match kind {
-            "hinge" => match axis_of(cx, j) {
+            "hinge" => match axis_of(cx, frames, j) {
                 Some(a) => Some(a),
                 None => continue,
             },
@@ -627,7 +1100,7 @@ fn gearboxes<'a, 'i>(
         if g.attribute("type") != Some("gearbox") {
             continue;
         }
-        let gname = g.attribute("name").unwrap_or("");
+        let gname = &qname(g);
         let name = cx.joint_name(gname);
         let Some(rn) = child(g, "gearbox_reference_body") else {
             cx.error(
@@ -639,12 +1112,8 @@ fn gearboxes<'a, 'i>(
             );
             continue;
         };
-        let reference = rn.text().unwrap_or("").trim().to_string();
-        if reference != "world"
-            && !links
-                .iter()
-                .any(|k| k.attribute("name") == Some(&reference))
-        {
+        let reference = resolve(g, rn.text().unwrap_or("").trim());
+        if reference != "world" && !links.iter().any(|k| qname(*k) == reference) {
             cx.error(
                 &rn.first_child().map_or_else(|| cx.tag(rn), |c| c.range()),
                 format!("unknown link `{reference}`"),
@@ -699,11 +1168,13 @@ fn gearboxes<'a, 'i>(
                 );
                 continue;
             };
-            let Some(u) = axis_in(cx, g, tag) else {
+            let Some(u) = axis_in(cx, frames, g, tag) else {
                 continue;
             };
-            let Some(w) = axis_of(cx, t) else { continue };
-            let tname = t.attribute("name").unwrap_or("");
+            let Some(w) = axis_of(cx, frames, t) else {
+                continue;
+            };
+            let tname = &qname(t);
             let (Some(ga), Some(ta)) = (gabs.clone(), abs_of(cx, frames, tname)) else {
                 continue;
             };
@@ -762,6 +1233,75 @@ fn gearboxes<'a, 'i>(
     }
 }
 
+/// A screw joint's translation along its axis as an expression of its angle `q` (rad), from
+/// SDFormat's `joint.sdf` (1.10 and later): `<screw_thread_pitch>` p is "the axial distance
+/// traveled for each revolution of the joint, with units of meters / revolution with a positive
+/// value corresponding to a right-handed thread", so the translation is `p q / (2 pi)`; the
+/// deprecated `<thread_pitch>` t, "interpreted by gazebo-classic as having units of radians /
+/// meter with a positive value corresponding to a left-handed thread", gives `-q / t`.
+/// `<screw_thread_pitch>` "supersedes" `<thread_pitch>` when both are given; with neither, the
+/// spec's default `<screw_thread_pitch>` 1 applies, with a warning.
+fn screw_lead(cx: &mut Cx<'_>, j: Node<'_, '_>, q: &str) -> Option<String> {
+    if let Some(n) = child(j, "screw_thread_pitch") {
+        let v = cx.text_numbers(n, 1)?;
+        return Some(format!("{} / (2 * pi) * {q}", number(&v[0].0, v[0].1)));
+    }
+    if let Some(n) = child(j, "thread_pitch") {
+        let v = cx.text_numbers(n, 1)?;
+        if v[0].1 == 0.0 {
+            cx.error(
+                &n.first_child().map_or_else(|| cx.tag(n), |c| c.range()),
+                format!(
+                    "screw joint `{}` has thread_pitch 0",
+                    j.attribute("name").unwrap_or("")
+                ),
+                "radians per metre: an infinite lead",
+                "`<thread_pitch>` is rad/m (positive: a left-handed thread); \
+                 `<screw_thread_pitch>` (SDF 1.10) is m per revolution",
+            );
+            return None;
+        }
+        return Some(format!("-{q} / ({})", number(&v[0].0, v[0].1)));
+    }
+    cx.warn(
+        &cx.attr_range(j, "type"),
+        "the screw joint has no `<screw_thread_pitch>` or `<thread_pitch>`",
+        "1 m per revolution",
+        "SDFormat's default `<screw_thread_pitch>` is 1 (m per revolution, right-handed)",
+    );
+    Some(format!("1 / (2 * pi) * {q}"))
+}
+
+/// A screw joint's steps: the rotation about the unit `axis` by `q` and the translation `lead`
+/// (an expression of `q`) along it; about a coordinate axis directly, else in a frame whose z
+/// is the axis (turned onto it before and back after), as a revolute joint's.
+fn screw_steps(q: &str, lead: &str, axis: [f64; 3]) -> Vec<String> {
+    match geom::coordinate_axis(axis) {
+        Some((k, s)) => {
+            let a = ["x", "y", "z"][k];
+            let mut steps = joint_steps("revolute", q, axis);
+            steps.push(quote(&if s > 0.0 {
+                format!("T{a}({lead})")
+            } else {
+                format!("T{a}(-({lead}))")
+            }));
+            steps
+        }
+        None => {
+            let aa = format!(
+                "{{ axis_angle = [{}] }}",
+                geom::z_onto(axis).map(fnum).join(", ")
+            );
+            vec![
+                aa.clone(),
+                format!("{{ revolute = {} }}", quote(q)),
+                quote(&format!("Tz({lead})")),
+                format!("{{ inverse = [{aa}] }}"),
+            ]
+        }
+    }
+}
+
 /// The steps from a joint's child link to the joint's frame: its `<pose>`, or through the model's
 /// frame when the pose is relative to another frame than the child.
 fn joint_pose<'a, 'i>(
@@ -774,10 +1314,9 @@ fn joint_pose<'a, 'i>(
     let Some(p) = child(j, "pose") else {
         return Vec::new();
     };
-    match p.attribute("relative_to") {
+    match p.attribute("relative_to").map(|r| resolve(j, r)) {
         Some(r) if r != child_link => {
-            let name = j.attribute("name").unwrap_or("");
-            let Some(abs) = abs_of(cx, f, name) else {
+            let Some(abs) = abs_of(cx, f, &qname(j)) else {
                 return Vec::new();
             };
             let mut steps = Vec::new();
@@ -874,7 +1413,7 @@ fn abs_of<'a, 'i>(cx: &mut Cx<'_>, f: &mut Frames<'a, 'i>, name: &str) -> Option
     let tag = node.tag_name().name();
     let pose_node = child(node, "pose");
     // What the pose is relative to: `relative_to`, else a joint's child link, a frame's
-    // `attached_to`, the model.
+    // `attached_to`, the model it is written in (for a nested model: the model around it).
     let default = match tag {
         "joint" => child(node, "child")
             .and_then(|c| c.text())
@@ -884,20 +1423,24 @@ fn abs_of<'a, 'i>(cx: &mut Cx<'_>, f: &mut Frames<'a, 'i>, name: &str) -> Option
         "frame" => node.attribute("attached_to").unwrap_or("").to_string(),
         _ => String::new(),
     };
-    let base_name = pose_node
+    let written = pose_node
         .and_then(|p| p.attribute("relative_to"))
         .map_or(default, str::to_string);
-    if !base_name.is_empty()
-        && base_name != "world"
-        && base_name != "__model__"
-        && !f.nodes.contains_key(base_name.as_str())
-    {
+    let base_name = resolve(
+        node,
+        if written.is_empty() {
+            "__model__"
+        } else {
+            &written
+        },
+    );
+    if base_name != "world" && base_name != "__model__" && !f.nodes.contains_key(&base_name) {
         let at = pose_node.map_or_else(|| cx.tag(node), |p| cx.attr_range(p, "relative_to"));
         cx.error(
             &at,
-            format!("unknown frame `{base_name}`"),
+            format!("unknown frame `{written}`"),
             "no link, joint or frame of this name",
-            "",
+            &scope_help(node, &base_name),
         );
         f.visiting.pop();
         f.done.insert(name.to_string(), None);
@@ -924,12 +1467,22 @@ fn abs_of<'a, 'i>(cx: &mut Cx<'_>, f: &mut Frames<'a, 'i>, name: &str) -> Option
 }
 
 /// The unit axis of a joint, in the joint's frame.
-fn axis_of(cx: &mut Cx<'_>, j: Node<'_, '_>) -> Option<[f64; 3]> {
-    axis_in(cx, j, "axis")
+fn axis_of<'a, 'i>(cx: &mut Cx<'_>, f: &mut Frames<'a, 'i>, j: Node<'a, 'i>) -> Option<[f64; 3]> {
+    axis_in(cx, f, j, "axis")
 }
 
-/// The unit vector of a joint's `<axis>` or `<axis2>` (`tag`), in the joint's frame.
-fn axis_in(cx: &mut Cx<'_>, j: Node<'_, '_>, tag: &str) -> Option<[f64; 3]> {
+/// The unit vector of a joint's `<axis>` or `<axis2>` (`tag`), in the joint's frame. SDFormat's
+/// `joint.sdf`: the axis "is expressed in the joint frame unless a different frame is expressed
+/// in the expressed_in attribute"; a vector given in another frame (a link, joint or `<frame>`,
+/// `__model__`) is turned into the joint's axes with both frames as posed, every joint at zero.
+/// A component within 1e-12 of zero after the turn is zero (an axis along a coordinate axis
+/// stays one joint step).
+fn axis_in<'a, 'i>(
+    cx: &mut Cx<'_>,
+    f: &mut Frames<'a, 'i>,
+    j: Node<'a, 'i>,
+    tag: &str,
+) -> Option<[f64; 3]> {
     let Some(x) = child(j, tag).and_then(|a| child(a, "xyz")) else {
         cx.error(
             &cx.tag(j),
@@ -939,30 +1492,46 @@ fn axis_in(cx: &mut Cx<'_>, j: Node<'_, '_>, tag: &str) -> Option<[f64; 3]> {
         );
         return None;
     };
-    if x.attribute("expressed_in").is_some_and(|e| !e.is_empty()) {
+    let written = x.attribute("expressed_in").filter(|e| !e.is_empty());
+    let frame = written.map(|e| resolve(j, e));
+    let jname = qname(j);
+    if let (Some(e), Some(w)) = (&frame, written)
+        && e != "world"
+        && e != "__model__"
+        && !f.nodes.contains_key(e)
+    {
         cx.error(
             &cx.attr_range(x, "expressed_in"),
-            "an axis expressed in another frame is not supported",
-            "",
-            "give the axis in the joint's frame",
+            format!("unknown frame `{w}`"),
+            "no link, joint or frame of this name",
+            "the axis is expressed in the joint's frame unless `expressed_in` names another",
         );
         return None;
     }
     let v = cx.text_numbers(x, 3)?;
-    let a = unit([v[0].1, v[1].1, v[2].1]);
-    if a.is_none() {
+    let Some(a) = unit([v[0].1, v[1].1, v[2].1]) else {
         cx.error(
             &x.first_child().map_or_else(|| cx.tag(x), |c| c.range()),
             "the joint's axis is zero",
             "no direction",
             "",
         );
+        return None;
+    };
+    match frame {
+        Some(e) if e != jname => {
+            let (ea, ja) = (abs_of(cx, f, &e)?, abs_of(cx, f, &jname)?);
+            let turned = geom::apply(&geom::mul(&geom::transpose(&ja.r), &ea.r), a);
+            let snapped = turned.map(|c| if c.abs() < 1e-12 { 0.0 } else { c });
+            unit(snapped)
+        }
+        _ => Some(a),
     }
-    a
 }
 
-fn dynamics(cx: &mut Cx<'_>, j: Node<'_, '_>, c: &mut Coord) {
-    let Some(d) = child(j, "axis").and_then(|a| child(a, "dynamics")) else {
+/// The `<dynamics>` of a joint's `<axis>` or `<axis2>` (`tag`) as the coordinate's keys.
+fn dynamics(cx: &mut Cx<'_>, j: Node<'_, '_>, tag: &str, c: &mut Coord) {
+    let Some(d) = child(j, tag).and_then(|a| child(a, "dynamics")) else {
         return;
     };
     let scalar = |cx: &mut Cx<'_>, tag: &str| {

@@ -66,6 +66,15 @@ impl<'t> Cx<'t> {
         self.files.len() - 1
     }
 
+    /// The path (as shown) of the file `node` is in.
+    pub(crate) fn path_of(&self, node: Node<'_, '_>) -> &str {
+        let ptr = node.document().input_text().as_ptr();
+        self.files
+            .iter()
+            .find(|f| f.text.as_ptr() == ptr)
+            .map_or(self.path.as_str(), |f| f.path.as_str())
+    }
+
     /// The texts of the included files (hashed with the source).
     pub(crate) fn included(&self) -> Vec<&'t str> {
         self.files[1..].iter().map(|f| f.text).collect()
