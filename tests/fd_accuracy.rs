@@ -1,6 +1,6 @@
 //! Forward dynamics' accuracy on real robots against an independent reference (issue 33): the
-//! UR5 (models/ur5.toml: a serial arm whose tool pose is a massless frame welded to the
-//! flange, its Cardan angles the pose's orientation) and the 6-UPS, 300 random assembled
+//! UR5 (models/ur5.toml: a serial arm whose flange pose is a task frame, coordinates that move
+//! no mass, URDF's roll, pitch, yaw its orientation) and the 6-UPS, 300 random assembled
 //! states each. The reference solves the saddle-point system built from the same kernel
 //! outputs in double-double arithmetic (`runtime/tests/common/dd.rs`), so the comparison
 //! measures the solver alone. Printed with `--nocapture`: the worst relative error of `Ẍ`
@@ -65,7 +65,7 @@ fn ur5_accelerations_within_5e_14_of_the_reference() {
         };
         data.set_home(&model);
         if forward_kinematics(&model, &mut data, &q).is_err() {
-            continue; // a pose whose Cardan angles are singular: no assembled state
+            continue; // a pose whose roll, pitch, yaw are singular: no assembled state
         }
         let qd: [f64; 6] = core::array::from_fn(|_| 1.5 * rng.sym());
         if forward_velocity(&model, &mut data, &qd).is_err() {
