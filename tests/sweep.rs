@@ -83,9 +83,9 @@ fn lengths(name: &str, coordinates: &[&str]) -> Vec<bool> {
                     .is_some_and(|f| text.contains(&format!("{{ frame = \"{f}\"")))
             });
             frame_origin
-                || text.lines().any(|l| {
-                    l.contains(&format!("name = \"{c}\"")) && l.contains("unit = \"m\"")
-                })
+                || text
+                    .lines()
+                    .any(|l| l.contains(&format!("name = \"{c}\"")) && l.contains("unit = \"m\""))
         })
         .collect()
 }
