@@ -102,8 +102,8 @@ fn ur5_accelerations_match_the_reference() {
     );
     // Near home within 5e-14 (measured 1.5e-14, as with the effector body's Rx Ry Rz angles
     // before the task frame). Anywhere, with the task frame's rpy, measured 7.0e-12 at one state
-    // near the elbow's and the wrist's singularities (sin q3 -0.13, sin q5 0.14: κ_x 7.5e4; the
-    // whole sample was within 1.5e-14 before, other states): every state is held to what a
+    // near the elbow's and the wrist's singularities (sin q3 -0.13, sin q5 0.14: κ_x 7.5e4; with the
+    // effector's Rx Ry Rz angles the sample's worst was 1.5e-14, its κ_x not recorded): every state is held to what a
     // backward-stable solve can promise, `error <= 10 κ_x ε`, the bound of
     // runtime/tests/robust_dynamics.rs (measured: at most 0.42).
     assert!(worst_home <= 5e-14, "near home: {worst_home:e}");
