@@ -90,19 +90,20 @@ fn figure_eight(t: f64) -> [[f64; 2]; 3] {
     ]
 }
 
-/// The UR5's tool motion of models/trajectories/ur5.toml: from its home pose at `t = 0`, a 5 cm
-/// circle, a 3 cm vertical figure and a 0.2 rad roll, with TraekP's `w`.
+/// The UR5's flange motion of models/trajectories/ur5.toml: from its home pose at `t = 0`
+/// (`link6_x`, `_y`, `_z`, `_roll`, `_pitch`, `_yaw`), a 5 cm circle, a 3 cm vertical figure and
+/// a 0.2 rad turn of the yaw, with TraekP's `w`.
 fn ur5_motion(t: f64) -> [[f64; 6]; 3] {
     let w = OMEGA;
     let (s1, c1) = (w * t).sin_cos();
     let (s2, c2) = (2.0 * w * t).sin_cos();
     let home = [
-        -0.561570105944,
-        -0.225272751691,
-        0.341242037137,
-        3.13500843821,
-        -0.0284631041949,
-        -1.47090166573,
+        -0.5615701059437073,
+        -0.2252727516909624,
+        0.34124203713702866,
+        -3.113927766653958,
+        0.009389622415266129,
+        1.470937846115427,
     ];
     let mut out = [home, [0.0; 6], [0.0; 6]];
     out[0][0] += 0.05 * s1;

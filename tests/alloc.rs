@@ -197,8 +197,15 @@ fn kernels_and_solvers_do_not_allocate() {
     failures.extend(check(stewart_2stage::Stewart2Stage::default(), two_stage));
     // The UR5 along its tool motion of models/trajectories/ur5.toml.
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-    let names = ["x", "y", "z", "rotx", "roty", "rotz"];
-    let tool = rbss::trajectory::load(&root.join("models/trajectories/ur5.toml"), &names)
+    let flange = [
+        "link6_x",
+        "link6_y",
+        "link6_z",
+        "link6_roll",
+        "link6_pitch",
+        "link6_yaw",
+    ];
+    let tool = rbss::trajectory::load(&root.join("models/trajectories/ur5.toml"), &flange)
         .expect("the UR5's trajectory");
     let ur5_motion = |t: f64| {
         let mut out = [[0.0; 6]; 3];
@@ -231,6 +238,7 @@ fn kernels_and_solvers_do_not_allocate() {
         family("tripod_3rps", ["z", "rotx", "roty"]),
     ));
     // The 6-RUS hexapod along models/trajectories/hexa_6rus.toml.
+    let names = ["x", "y", "z", "rotx", "roty", "rotz"];
     let hexa = rbss::trajectory::load(&root.join("models/trajectories/hexa_6rus.toml"), &names)
         .expect("the hexapod's trajectory");
     let hexa_motion = |t: f64| {

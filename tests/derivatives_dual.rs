@@ -37,7 +37,7 @@
 //!   normwise over each matrix (`max_col ‖K d - rhs‖∞ / max_col (‖K‖∞ ‖d‖∞ + ‖rhs‖∞)`), is
 //!   condition-free and asserted `<= 1e-12`. The multipliers' scale in the forward error is at
 //!   least `max |forces of the right-hand sides| / max |G|` (the UR5's multipliers on its
-//!   massless frame are zero, their derivatives rounding).
+//!   task frame's closure are zero, their derivatives rounding).
 //!
 //! `cargo test --release --test derivatives_dual -- --nocapture` prints each robot's worst
 //! errors and `kappa`.
@@ -425,7 +425,7 @@ fn check<K: Derivatives<N, M>, const N: usize, const M: usize>(
         };
         // Per matrix (X, Ẋ, U) x (Ẍ, lambda): the normwise forward error. The multipliers'
         // scale is at least that of the forces of the right-hand sides over `max |G|` (a
-        // multiplier that does not move, such as the UR5's on its massless frame, comes out of
+        // multiplier that does not move, such as the UR5's on its task frame's closure, comes out of
         // them with that rounding).
         let ranges = [(0, N), (N, 2 * N), (2 * N, nrhs)];
         let bound = 1e-12;

@@ -43,7 +43,7 @@ fn energy<K: Dynamics<N, M>, const N: usize, const M: usize>(
 
 /// Cholesky of a dense symmetric matrix; `false` when not positive definite.
 /// Cholesky on the coordinates that carry mass: a coordinate whose row of `M` is zero moves
-/// no body (the UR5's end-effector pose, a massless frame tied to the arm by loops) and is
+/// no body (the UR5's flange pose, the coordinates of its task frame, tied to the arm by their closure) and is
 /// left out; every other must make `M` positive definite.
 fn is_positive_definite<const N: usize>(m: &[[f64; N]; N]) -> bool {
     let idx: Vec<usize> = (0..N).filter(|&i| m[i].iter().any(|&x| x != 0.0)).collect();

@@ -8,7 +8,7 @@
 //!   the library's continuation with ten times shorter steps reaches (the configuration the
 //!   mechanism reaches by moving its actuators from home along the straight path). For the UR5
 //!   the tool frame is also checked independently: link 6's rotation and origin (from the
-//!   generated `body_frames`) against the effector's.
+//!   generated `body_frames`) against the pose its task frame's outputs state.
 //! - IK at reachable poses (the outputs of the correct FK answers). A *false "out of reach"* is
 //!   an unreachable verdict at such a pose; a correct answer closes every loop, passes the
 //!   certificate and keeps home's working modes (the IK blocks' signs).
@@ -70,15 +70,22 @@ fn list(v: &[f64]) -> String {
         .join(",")
 }
 
-/// Whether each coordinate is a length (unit `m` in the model file), read from the file.
+/// Whether each coordinate is a length (unit `m` in the model file, or the origin `F_x`, `F_y`,
+/// `F_z` of a task frame `{ frame = "F", ... }` of its `outputs`), read from the file.
 fn lengths(name: &str, coordinates: &[&str]) -> Vec<bool> {
     let path = format!("{}/models/{name}.toml", env!("CARGO_MANIFEST_DIR"));
     let text = std::fs::read_to_string(&path).unwrap();
     coordinates
         .iter()
         .map(|c| {
-            text.lines()
-                .any(|l| l.contains(&format!("name = \"{c}\"")) && l.contains("unit = \"m\""))
+            let frame_origin = ["_x", "_y", "_z"].iter().any(|s| {
+                c.strip_suffix(s)
+                    .is_some_and(|f| text.contains(&format!("{{ frame = \"{f}\"")))
+            });
+            frame_origin
+                || text
+                    .lines()
+                    .any(|l| l.contains(&format!("name = \"{c}\"")) && l.contains("unit = \"m\""))
         })
         .collect()
 }
@@ -100,17 +107,29 @@ fn distance(a: &[f64], b: &[f64], length: &[bool]) -> f64 {
         .fold(0.0, f64::max)
 }
 
-/// The UR5's tool frame, independently: link 6 against the effector (rotation and origin).
+/// The UR5's tool frame, independently: link 6 (rotation and origin, from the generated
+/// `body_frames`) against the pose its task frame's outputs state, `x[6..9]` and
+/// `R = Rz(yaw) Ry(pitch) Rx(roll)` of `x[9..12]` (roll, pitch, yaw), built here.
 fn ur5_tool_error(x: &[f64]) -> f64 {
     let c = ur5::Params::default().consts();
     let x: [f64; ur5::N] = x.try_into().unwrap();
     let mut frames = [[0.0; 12]; ur5::NB];
     ur5::body_frames(&c, &x, &mut frames);
     let link6 = ur5::BODIES.iter().position(|&b| b == "link6").unwrap();
-    let eff = ur5::BODIES.iter().position(|&b| b == "effector").unwrap();
+    let (sr, cr) = x[9].sin_cos();
+    let (sp, cp) = x[10].sin_cos();
+    let (sy, cy) = x[11].sin_cos();
+    let r = [
+        [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+        [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+        [-sp, cp * sr, cp * cr],
+    ];
+    // Column-major rotation, then the origin, as `body_frames` writes them.
+    let pose: [f64; 12] =
+        std::array::from_fn(|k| if k < 9 { r[k % 3][k / 3] } else { x[6 + k - 9] });
     frames[link6]
         .iter()
-        .zip(&frames[eff])
+        .zip(&pose)
         .map(|(a, b)| (a - b).abs())
         .fold(0.0, f64::max)
 }
@@ -303,8 +322,8 @@ fn every_answer_is_correct_or_refused() {
     assert!(failures.is_empty(), "{failures:#?}");
 }
 
-/// The UR5's pose of link 6 at the joint angles `q` (the effector's outputs: position, then
-/// `R = Rx(rotx) Ry(roty) Rz(rotz)`'s angles), from the generated `body_frames`.
+/// The UR5's pose of link 6 at the joint angles `q` (its task frame's outputs: position, then
+/// URDF's roll, pitch, yaw of `R = Rz(yaw) Ry(pitch) Rx(roll)`), from the generated `body_frames`.
 fn ur5_pose(q: &[f64; 6]) -> [f64; 6] {
     let c = ur5::Params::default().consts();
     let mut x = [0.0; ur5::N];
@@ -315,15 +334,15 @@ fn ur5_pose(q: &[f64; 6]) -> [f64; 6] {
     let f = frames[link6];
     // Column-major: R[row][col] = f[3 col + row].
     let r = |row: usize, col: usize| f[3 * col + row];
-    let b = r(0, 2).clamp(-1.0, 1.0).asin();
-    let cz = (-r(0, 1)).atan2(r(0, 0));
-    let a = (-r(1, 2)).atan2(r(2, 2));
-    [f[9], f[10], f[11], a, b, cz]
+    let roll = r(2, 1).atan2(r(2, 2));
+    let pitch = (-r(2, 0)).atan2(r(0, 0).hypot(r(1, 0)));
+    let yaw = r(1, 0).atan2(r(0, 0));
+    [f[9], f[10], f[11], roll, pitch, yaw]
 }
 
 /// `rbss ik --model ur5` at poses the arm reaches by construction (link 6's pose at random
 /// joint angles in [-pi, pi]^6): never "out of reach", never a wrong answer (the tool frame is
-/// checked against the effector's, and the working mode against home's). 200 poses
+/// checked against the pose of its outputs, and the working mode against home's). 200 poses
 /// (`RBSS_SWEEP_UR5_POSES` for more).
 #[test]
 fn ur5_ik_at_reachable_poses_is_never_out_of_reach() {

@@ -1,5 +1,5 @@
-//! The UR5 (models/ur5.toml), a serial arm in the paper's redundant coordinates, through the
-//! same runtime as the parallel robots, against oracles written here from UR's published
+//! The UR5 (models/ur5.toml), a serial arm whose outputs are its flange's pose (a task frame on
+//! link 6, URDF's xyz-rpy), through the same runtime as the parallel robots, against oracles written here from UR's published
 //! parameters and nothing of rbss's generated code:
 //!
 //! - forward kinematics by the product of the standard DH transforms;
@@ -67,13 +67,14 @@ fn dh_frames(q: &[f64; 6]) -> Vec<(M3, V3)> {
     out
 }
 
-/// The pose (x, y, z, rotx, roty, rotz) of the flange, R = Rx Ry Rz.
+/// The pose (x, y, z, roll, pitch, yaw) of the flange, R = Rz(yaw) Ry(pitch) Rx(roll) (URDF's
+/// rpy, pitch in [-pi/2, pi/2]).
 fn dh_pose(q: &[f64; 6]) -> [f64; 6] {
     let (r, p) = dh_frames(q)[6];
-    let roty = r[0][2].asin();
-    let rotz = (-r[0][1]).atan2(r[0][0]);
-    let rotx = (-r[1][2]).atan2(r[2][2]);
-    [p[0], p[1], p[2], rotx, roty, rotz]
+    let roll = r[2][1].atan2(r[2][2]);
+    let pitch = (-r[2][0]).atan2(r[0][0].hypot(r[1][0]));
+    let yaw = r[1][0].atan2(r[0][0]);
+    [p[0], p[1], p[2], roll, pitch, yaw]
 }
 
 /// The links' inertia about their centres of mass in their DH axes (the model's cylinders).
@@ -176,7 +177,7 @@ fn ur5_ik_and_fk_match_the_dh_product() {
         for (k, &o) in model.structure().outputs.iter().enumerate() {
             let mut d = data.x[o] - pose[k];
             if k >= 3 {
-                // An angle: FK may land on the same orientation 2 pi away (rotx is near pi).
+                // An angle: FK may land on the same orientation 2 pi away (the roll is near pi).
                 d = (d + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
                     - std::f64::consts::PI;
             }

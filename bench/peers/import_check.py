@@ -74,6 +74,9 @@ class Rbss:
         robot = rbss_py.compile(model_file)
         self.coords = list(robot.coordinates)
         self.actuated = [self.coords[i] for i in robot.actuated_index]
+        # the generated home (a task frame's coordinates are not in the model file: their home
+        # is the frame's pose at the joints' home, computed by rbss)
+        self.home = dict(zip(self.coords, map(float, robot.home)))
 
     def eval(self, states):
         path = os.path.join(self.build, "import_states.json")
@@ -371,8 +374,8 @@ ERD = [
 
 def external(build):
     """The public URDFs out of the wheel, a model file for each (the URDF plus what rbss needs
-    to take an open arm: the tool's pose as six output coordinates on a massless body welded to
-    the flange, the home), and a copy without <visual>/<collision> for MuJoCo (whose URDF
+    to take an open arm with inverse kinematics: the flange's pose as a task frame, the joints'
+    home), and a copy without <visual>/<collision> for MuJoCo (whose URDF
     compiler would load the meshes, given as package:// paths)."""
     import glob
     import xml.etree.ElementTree as ET
@@ -398,41 +401,21 @@ def external(build):
             ET.ElementTree(root).write(mj_urdf)
             model = pin.buildModelFromUrdf(urdf)
             joints = [model.names[j] for j in range(1, model.njoints)]
-            data = model.createData()
-            pin.framesForwardKinematics(model, data, np.array(qhome))
-            T = data.oMf[model.getFrameId(flange)]
-            R, t = T.rotation, T.translation
-            # rbss's effector: Tx Ty Tz Rx(a) Ry(b) Rz(c)
-            a, b, c = np.arctan2(-R[1, 2], R[2, 2]), np.arcsin(R[0, 2]), np.arctan2(-R[0, 1], R[0, 0])
-            pose = dict(zip(["x", "y", "z", "rotx", "roty", "rotz"], [*t, a, b, c]))
             lines = [f"# {name}: {inner} of the example-robot-data {ERD_VERSION} wheel, written by",
-                     "# bench/peers/import_check.py: the tool's pose welded to the flange, the home.",
+                     "# bench/peers/import_check.py: the flange's pose as a task frame, the home.",
                      f'urdf = "{name}.urdf"', "", "coordinates = ["]
             lines += [f'  {{ name = "{j}", home = {h!r} }},' for j, h in zip(joints, qhome)]
-            lines += [f'  {{ name = "{k}", unit = "{"m" if k in "xyz" else "rad"}", home = {v:.6f} }},'
-                      for k, v in pose.items()]
-            # a joint besides the arm's (the z1's gripper) is actuated and must be an output:
-            # an output coordinate NAME_out on a massless frame, coupled to it
-            lines += [f'  {{ name = "{j}_out", unit = "rad", home = {qhome[joints.index(j)]!r} }},'
-                      for j in extra]
-            outs = ", ".join(f'"{k}"' for k in [*pose, *(j + "_out" for j in extra)])
-            lines += ["]", "", "[robot]", f'name = "{name}"', f"outputs = [{outs}]", "",
-                      "[[body]]", 'name = "effector"',
-                      'transforms = [["x", "y", "z", "rotx", "roty", "rotz", 1, 2, 3, 4, 5, 6]]', "",
-                      "[[loop]]", 'name = "tcp"', 'kind = "weld"', f'a = {{ body = "{flange}" }}',
-                      'b = { body = "effector" }', ""]
-            for j in extra:
-                lines += ["[[body]]", f'name = "{j}_out_frame"',
-                          f'transforms = [{{ revolute = "{j}_out" }}]', "",
-                          "[[loop]]", f'name = "{j}_out"', 'kind = "coupling"',
-                          f'a = "{j}_out"', f'b = "{j}"', ""]
+            # a joint besides the arm's (the z1's gripper) is actuated and must be an output
+            outs = ", ".join([f'{{ frame = "{flange}", pose = "xyz-rpy" }}',
+                              *(f'"{j}"' for j in extra)])
+            lines += ["]", "", "[robot]", f'name = "{name}"', f"outputs = [{outs}]", ""]
             toml = os.path.join(d, name + ".toml")
             with open(toml, "w") as f:
                 f.write("\n".join(lines))
             cases.append((name, toml, urdf, toml,
                           f"`{inner}` of the `example-robot-data` {ERD_VERSION} wheel (PyPI); "
-                          f"its model file (written by the script: the URDF, the tool's pose "
-                          f"welded to `{flange}`, a home) is `build/erd/{name}.toml`; MuJoCo loads "
+                          f"its model file (written by the script: the URDF, `{flange}`'s pose "
+                          f"as a task frame, the joints' home) is `build/erd/{name}.toml`; MuJoCo loads "
                           "the URDF without its `<visual>` and `<collision>` (meshes)",
                           mj_urdf, f"{os.path.basename(inner)} (example-robot-data)"))
     return cases
@@ -443,8 +426,9 @@ def check(name, toml, source, guess_toml, note, rbss, build, rng, mj_src=None):
     peer_src = os.path.join(SRC, source if not source.endswith(".sdf") else "four_bar.xml")
     kind = "urdf" if source.endswith(".urdf") else "mjcf"
     rb = Rbss(rbss, build, model_file)
-    states, fres, iters = random_states(rb, homes(guess_toml if os.path.isabs(guess_toml)
-                                                  else os.path.join(SRC, guess_toml)), rng)
+    guess = {**rb.home, **homes(guess_toml if os.path.isabs(guess_toml)
+                                else os.path.join(SRC, guess_toml))}
+    states, fres, iters = random_states(rb, guess, rng)
     ev = rb.eval(states)
     peers = {}
     mjp = MuJoCo(mj_src or peer_src)
@@ -541,7 +525,7 @@ def main():
          "Also two public robot descriptions, URDFs of the `example-robot-data` "
          f"{ERD_VERSION} wheel from PyPI (the UR5 of `ur_description` and Unitree's Z1 arm with "
          "its gripper joint, joint damping 1 to 2 N m s/rad), each with a model file the script "
-         "writes (the URDF, the tool's pose welded to the flange, a home). "
+         "writes (the URDF, the flange's pose as a task frame, the joints' home). "
          f"At {N_STATES} random states per model (seed {SEED}): every coordinate moved by up to 0.1 "
          "from the reference model's home, then Newton (min-norm steps on rbss's f and G) onto "
          "the loops (max |f| after, below); velocities random in G's null space; U uniform in "
@@ -559,7 +543,7 @@ def main():
          "equalities' two points. Pinocchio: `constraintDynamics` with one `CONTACT_3D` "
          "(`LOCAL`) constraint per connect, its two points in the two joints' frames, no "
          "Baumgarte term, `ProximalSettings(1e-14, mu = 1e-9, 200)`. The open chains (the arms: "
-         "their model files' weld to a massless effector does not load the arm) against "
+         "their model files' task frame adds no mass) against "
          "MuJoCo's unconstrained `M^-1 (tau - bias)` and Pinocchio's `aba`. Joint damping: in "
          "MuJoCo's `qfrc_passive`; Pinocchio keeps the URDF's in `model.damping`, outside `nle` "
          "and `aba`, so `-damping v` is added to its bias and its `tau` (URDF `friction`, which "
@@ -597,8 +581,8 @@ def main():
     rt_err, rt_time = roundtrip(rbss, build)
     L += ["## A URDF arm to `rbss roundtrip`", "",
           "Typed: one command, after writing the model file `bench/peers/import/ur5_roundtrip.toml` "
-          "(23 lines besides comments: `urdf = ...`, rough homes of q2..q5 and of the tool's pose, the six output "
-          "coordinates, the body they move and the weld `tcp` to the flange `tool0`) and with a "
+          "(8 lines besides comments: `urdf = ...`, rough homes of q2..q5 and the outputs, the task "
+          "frame of the flange `tool0`) and with a "
           "trajectory of the outputs (`models/trajectories/ur5.toml`, 6 expressions):", "",
           "```sh",
           "rbss roundtrip --model-file bench/peers/import/ur5_roundtrip.toml \\",
@@ -606,9 +590,8 @@ def main():
           "```", "",
           f"This run: round-trip max output error {rt_err:.3e}, {rt_time:.2f} s (the first run "
           "after an edit generates and compiles the robot, about 13 s here). What the URDF cannot "
-          "give is in the file's comment: the outputs and the weld, a non-singular home (all "
-          "joints at zero is the stretched arm: `rbss-codegen` refuses it), a reachable rough "
-          "tool pose, the trajectory.", ""]
+          "give is in the file's comment: the outputs (the task frame), a non-singular home (all "
+          "joints at zero is the stretched arm: `rbss-codegen` refuses it), the trajectory.", ""]
     with open(out, "w") as f:
         f.write("\n".join(L))
     print("\n".join(L))

@@ -309,7 +309,7 @@ fn graph_derivation_matches_the_expanded_one() {
             compare(path, &source, form);
         }
     }
-    // A weld loop (the UR5's tool pose): its rotation rows, their G by the chain rule and their
+    // A weld loop (the closure of the UR5's task frame on its flange): its rotation rows, their G by the chain rule and their
     // gamma against the expanded reference.
     let ur5 = std::fs::read_to_string(root.join("models/ur5.toml")).unwrap();
     compare("models/ur5.toml", &ur5, Form::Recursive);

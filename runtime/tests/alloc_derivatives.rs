@@ -1,6 +1,6 @@
 //! No allocation in the derivatives of forward dynamics: after `ForwardDynamicsDerivatives::new`
 //! and one warm-up call, `forward_dynamics_derivatives` allocates zero times, on the generated
-//! 6-UPS (by the elimination and by the dense fallback) and on the UR5 (a massless frame), also
+//! 6-UPS (by the elimination and by the dense fallback) and on the UR5 (a task frame, which moves no mass), also
 //! when it fails; `linearize` and `state_space` on the 6-UPS, in both coordinates; the
 //! RK4 and semi-implicit Euler steps' Jacobians, and the projected step's. Same counting global allocator as `alloc.rs`; one `#[test]` per binary.
 

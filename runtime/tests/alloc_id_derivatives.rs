@@ -1,7 +1,7 @@
 //! No allocation in the derivatives of inverse dynamics: after
 //! `InverseDynamicsDerivatives::new` and one warm-up call, `inverse_dynamics_derivatives`
 //! allocates zero times on the generated 6-UPS (by the block elimination and by the dense LU),
-//! also when it fails, and on the UR5 (a massless frame). Same counting global allocator as
+//! also when it fails, and on the UR5 (a task frame, which moves no mass). Same counting global allocator as
 //! `alloc.rs`; one `#[test]` per binary.
 
 use rbss_runtime::{

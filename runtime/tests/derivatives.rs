@@ -1,7 +1,7 @@
 //! The derivatives of the equations of motion against finite differences, on four generated
 //! robots: the paper's 6-UPS (closed chains, 18 constraints), the five-bar (one planar loop),
-//! the UR5 (an open arm whose pose is a massless frame tied to the tool by loops: `M` singular,
-//! the saddle-point system not) and the spring pendulum (a joint spring and damper).
+//! the UR5 (an open arm whose flange pose is a task frame, coordinates that move no mass, tied
+//! to the flange by its closure: `M` singular, the saddle-point system not) and the spring pendulum (a joint spring and damper).
 //!
 //! - The generated kernel `dynamics_derivatives` (`∂r/∂X`, `∂r/∂Ẋ` of
 //!   `r = M Ẍ - psi + Gᵀ lambda` and `∂c/∂X`, `∂c/∂Ẋ` of `c = G Ẍ - gamma`) against central

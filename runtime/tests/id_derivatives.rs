@@ -1,6 +1,6 @@
 //! The derivatives of inverse dynamics (`∂U`, `∂lambda` with respect to `X`, `Ẋ`, `Ẍ`) on
 //! the generated 6-UPS (18 loop equations, 3 × 3 blocks), five-bar (one planar loop), UR5 (a
-//! massless frame tied to the tool by loops: `M` singular, `[S | Gᵀ]` not) and spring
+//! task frame on its flange, coordinates that move no mass: `M` singular, `[S | Gᵀ]` not) and spring
 //! pendulum (a joint spring and damper):
 //!
 //! - against central differences of `inverse_dynamics` itself (a second `Data`), at states
@@ -320,7 +320,7 @@ where
         let nrm = |m: &DMatrix<f64>| amax(m.as_slice());
         // The multipliers' derivatives are at least at the scale of the forces they balance
         // (the gears for `U`, `∂r` for `X` and `Ẋ`) over `max |G|`: a multiplier that does not
-        // move (the UR5's, whose loops tie a massless frame) comes out of them with that
+        // move (the UR5's, whose closure ties its task frame, which moves no mass) comes out of them with that
         // rounding.
         let gmax = amax(model.structure().gear).max(1.0);
         let rmax = amax(id.dr_dx.as_slice()).max(amax(id.dr_dxdot.as_slice()));

@@ -1,5 +1,5 @@
 //! The manifold linearisation (`linearize`) against finite differences along the manifold, on
-//! the 6-UPS, the five-bar and the UR5 (a massless tool frame), in both choices of independent
+//! the 6-UPS, the five-bar and the UR5 (its flange's task frame, which moves no mass), in both choices of independent
 //! coordinates: perturb `y` (or `ẏ`, or `U`), re-solve the positions with the runtime's own
 //! solve (inverse kinematics from the outputs, forward kinematics' Newton solve from the
 //! actuated coordinates, each from the same warm start), re-solve the velocities
