@@ -337,29 +337,6 @@ fn urdf_planar_joints_are_three_coordinates() {
     )
     .unwrap();
     let imported = model_at(&d.join("cart.toml"));
-    // The coupled tendons are not skipped; a coupled tendon's stiffness is, with a warning.
-    use rbss_codegen::import::{Format, import_file};
-    let xml = here().join("couplings.xml");
-    let (_, warnings) = import_file(&xml, "couplings.xml", Format::Mjcf)
-        .unwrap_or_else(|e| panic!("{}", e.render()));
-    assert!(warnings.items.is_empty(), "{}", warnings.render_warnings());
-    let dir = tempfile::tempdir().unwrap();
-    let text = std::fs::read_to_string(&xml).unwrap();
-    let stiff = text.replace(
-        "<fixed name=\"t2\">",
-        "<fixed name=\"t2\" stiffness=\"10\">",
-    );
-    assert_ne!(stiff, text);
-    std::fs::write(dir.path().join("stiff.xml"), stiff).unwrap();
-    let (_, warnings) = import_file(&dir.path().join("stiff.xml"), "stiff.xml", Format::Mjcf)
-        .unwrap_or_else(|e| panic!("{}", e.render()));
-    let report = warnings.render_warnings();
-    assert_eq!(warnings.items.len(), 1, "{report}");
-    assert!(
-        report.contains("tendon `t2`'s stiffness is not applied"),
-        "{report}"
-    );
-
     let names: Vec<&str> = imported
         .coordinates
         .iter()
@@ -1247,6 +1224,8 @@ fn mjcf_polynomial_and_tendon_equalities_are_couplings() {
     println!("G vs central differences {worst_g:e}, gamma vs second differences {worst_gamma:e}");
     assert!(worst_g < 1e-8, "G: {worst_g:e}");
     assert!(worst_gamma < 1e-6, "gamma: {worst_gamma:e}");
+}
+
 /// Each imported body's mass, centre of mass and inertia entries, by name.
 fn masses(path: &Path) -> Vec<(String, f64, [f64; 3], [f64; 6])> {
     use rbss_codegen::import::{Format, import_file};
