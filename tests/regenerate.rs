@@ -59,6 +59,7 @@ fn generated_crates_are_up_to_date() {
     let opts = rbss_codegen::Options {
         freeze: true,
         kinematics_only: true,
+        ..Default::default()
     };
     let frozen =
         rbss_codegen::generate("models/five_bar.toml", &source, &opts, &mut |_| {}).unwrap();
