@@ -1107,8 +1107,16 @@ fn manifest_string(manifest: &str, key: &str) -> Option<String> {
 }
 
 /// Writes the robot's crate of `model` to `dir`: the generator in this process, or the command
-/// `$RBSS_CODEGEN` names. Errors are the generator's diagnostics (file, line and column).
-fn generate(cache: &Cache, model: &Path, variant: Variant, dir: &Path) -> Result<(), String> {
+/// `$RBSS_CODEGEN` names. Errors are the generator's diagnostics (file, line and column); its
+/// warnings (an importer's skipped elements, an angle taken as radians) go to `progress`, one
+/// line each, as `rbss-codegen` prints them.
+fn generate(
+    cache: &Cache,
+    model: &Path,
+    variant: Variant,
+    dir: &Path,
+    progress: &mut dyn FnMut(&str),
+) -> Result<(), String> {
     let no_derivatives = variant == Variant::Plain;
     if let Some(codegen) = &cache.codegen {
         let mut cmd = Command::new(codegen);
@@ -1121,9 +1129,14 @@ fn generate(cache: &Cache, model: &Path, variant: Variant, dir: &Path) -> Result
                 codegen.display()
             )
         })?;
+        let stderr = String::from_utf8_lossy(&out.stderr);
         if !out.status.success() {
-            return Err(String::from_utf8_lossy(&out.stderr).trim_end().to_string());
+            return Err(stderr.trim_end().to_string());
         }
+        stderr
+            .lines()
+            .filter(|l| l.contains(": warning: "))
+            .for_each(|l| progress(l.trim_start_matches("rbss-codegen: ")));
         return Ok(());
     }
     let source = rbss_codegen::source::read_source(model).map_err(|d| d.render())?;
@@ -1133,7 +1146,8 @@ fn generate(cache: &Cache, model: &Path, variant: Variant, dir: &Path) -> Result
     let runtime = runtime.to_string_lossy().replace('\\', "/");
     let model_path = model.to_string_lossy();
     // A panic in the generator is a bug of rbss; it ends this run with an error, not the process.
-    let generated = std::panic::catch_unwind(|| {
+    let mut warnings = Vec::new();
+    let generated = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
         rbss_codegen::generate_with_runtime(
             &model_path,
             &source,
@@ -1142,11 +1156,15 @@ fn generate(cache: &Cache, model: &Path, variant: Variant, dir: &Path) -> Result
                 ..Default::default()
             },
             &runtime,
-            // The progress lines (and warnings) are the generator command's; the library's
-            // build says its own.
-            &mut |_| {},
+            // The generator's progress lines are its command's (the library's build says its
+            // own); its warnings are the user's.
+            &mut |line: &str| {
+                if line.contains(": warning: ") {
+                    warnings.push(line.to_string());
+                }
+            },
         )
-    })
+    }))
     .map_err(|_| {
         format!(
             "{}: the generator panicked (a bug of rbss-codegen; please report it)",
@@ -1154,6 +1172,7 @@ fn generate(cache: &Cache, model: &Path, variant: Variant, dir: &Path) -> Result
         )
     })?
     .map_err(|e| e.to_string().trim_end().to_string())?;
+    warnings.iter().for_each(|w| progress(w));
     rbss_codegen::write_crate(dir, &generated).map_err(|e| e.to_string())
 }
 
@@ -1172,7 +1191,7 @@ fn build_in(
     let t0 = std::time::Instant::now();
     let robot_dir = tmp.join("robot");
     progress(&format!("generating {} ...", model.display()));
-    generate(cache, model, variant, &robot_dir)?;
+    generate(cache, model, variant, &robot_dir, progress)?;
     let manifest_text = fs::read_to_string(robot_dir.join("rbss-manifest.toml"))
         .map_err(|e| format!("{}: no manifest: {e}", robot_dir.display()))?;
     let manifest = toml::de::DeTable::parse(&manifest_text)

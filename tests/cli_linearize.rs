@@ -33,7 +33,7 @@ fn matrix(v: &serde_json::Value, what: &str) -> Vec<Vec<f64>> {
 
 /// The state file at home with the velocity from the outputs' rates `rates`, and the runtime's
 /// linearisation there in `c`.
-fn case<K: rbss_runtime::Dynamics<N, M>, const N: usize, const M: usize>(
+fn case<K: rbss_runtime::DynamicsDerivatives<N, M>, const N: usize, const M: usize>(
     model: &Model<K, N, M>,
     rates: &[f64],
     u: &[f64],
@@ -51,7 +51,7 @@ fn case<K: rbss_runtime::Dynamics<N, M>, const N: usize, const M: usize>(
     (path.to_str().unwrap().to_string(), data, lin)
 }
 
-fn check<K: rbss_runtime::Dynamics<N, M>, const N: usize, const M: usize>(
+fn check<K: rbss_runtime::DynamicsDerivatives<N, M>, const N: usize, const M: usize>(
     name: &str,
     model: &Model<K, N, M>,
     rates: &[f64],
@@ -201,7 +201,7 @@ fn refusals() {
 /// numbers are the runtime's `inverse_dynamics_derivatives` (exactly, after the JSON round
 /// trip) and match central differences of the runtime's `inverse_dynamics` (relative to each
 /// matrix's largest entry, <= 1e-6); returns the worst relative difference.
-fn check_id<K: rbss_runtime::Dynamics<N, M>, const N: usize, const M: usize>(
+fn check_id<K: rbss_runtime::DynamicsDerivatives<N, M>, const N: usize, const M: usize>(
     name: &str,
     model: &Model<K, N, M>,
     rates: &[f64],

@@ -571,13 +571,37 @@ fn mjcf_include_edits_and_two_directories() {
         }
         std::fs::write(dir.join("four_bar_bodies.xml"), body_text).unwrap();
     }
+    // The second source has a sensor, which the importer skips with a warning: the first run
+    // (the one that generates) shows it, at the sensor's line.
+    let with_sensor = std::fs::read_to_string(b.join("four_bar_split.xml"))
+        .unwrap()
+        .replace(
+            "</mujoco>",
+            "  <sensor>\n    <jointpos joint=\"th1\"/>\n  </sensor>\n</mujoco>",
+        );
+    std::fs::write(b.join("four_bar_split.xml"), &with_sensor).unwrap();
+    let sensor_line = with_sensor
+        .lines()
+        .position(|l| l.contains("<sensor>"))
+        .unwrap()
+        + 1;
     let x = [0.2, -0.1, 0.1];
     let model = "four_bar_split.toml";
     let (m1, psi1, stderr) = mass_and_psi(&cache, &a, model, &x);
     assert!(stderr.contains("compiling robot"), "{stderr}");
+    assert!(!stderr.contains("warning"), "{stderr}");
     // The same relative path in another directory: another robot.
     let (m2, psi2, stderr) = mass_and_psi(&cache, &b, model, &x);
     assert!(stderr.contains("compiling robot"), "{stderr}");
+    let warning = stderr
+        .lines()
+        .find(|l| l.contains(": warning: "))
+        .unwrap_or_else(|| panic!("no warning: {stderr}"));
+    assert!(
+        warning.contains(&format!("four_bar_split.xml:{sensor_line}:"))
+            && warning.ends_with("sensors are skipped"),
+        "{warning}"
+    );
     assert_ten_times("M", &m2, &m1);
     assert_ten_times("psi", &psi2, &psi1);
     // Cached: the first directory's robot again, not compiled.
