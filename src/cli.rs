@@ -778,7 +778,7 @@ pub fn run_with_model<K: DynamicsDerivatives<N, M> + Clone, const N: usize, cons
 /// [`run_with_model`] for a robot generated without the derivative kernel (the library `rbss
 /// --model-file` builds for the subcommands that take no derivatives): every subcommand but
 /// those that need it, which are an error here (the command builds the model's library with
-/// derivatives for them, [`crate::model_file::Variant::for_command`]).
+/// derivatives for them, [`crate::model_file::Variant::Full`]).
 pub fn run_without_derivatives<K: Dynamics<N, M> + Clone, const N: usize, const M: usize>(
     cmd: Cmd,
     model: Model<K, N, M>,

@@ -34,7 +34,13 @@ fn main() -> ExitCode {
     // A robot from a model file: its library runs the subcommand (parsing the same arguments).
     if let Some(path) = cli.cmd.model_file().map(str::to_string) {
         let args: Vec<String> = std::env::args().collect();
-        let variant = rbss::model_file::Variant::for_command(&cli.cmd);
+        let variant = if cli.cmd.is_study() {
+            rbss::model_file::Variant::Studies
+        } else if cli.cmd.needs_derivatives() {
+            rbss::model_file::Variant::Full
+        } else {
+            rbss::model_file::Variant::Plain
+        };
         return match rbss::model_file::run(&path, variant, &args) {
             Ok(code) => ExitCode::from(code),
             Err(e) => {

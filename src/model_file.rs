@@ -73,19 +73,6 @@ pub enum Variant {
     Studies,
 }
 
-impl Variant {
-    /// The variant a subcommand runs in.
-    pub fn for_command(cmd: &crate::cli::Cmd) -> Variant {
-        if cmd.is_study() {
-            Variant::Studies
-        } else if cmd.needs_derivatives() {
-            Variant::Full
-        } else {
-            Variant::Plain
-        }
-    }
-}
-
 /// The cache: where entries live, where cargo builds, with which tools.
 #[derive(Debug, Clone)]
 pub struct Cache {

@@ -1843,3 +1843,39 @@ fn sdf_includes_are_nested_models() {
         "{text}"
     );
 }
+
+/// SDF 1.6's `<axis><use_parent_model_frame>true` (removed in 1.7, whose converter writes
+/// `expressed_in="__model__"` for it): the axis in the model's frame. ujoint.sdf with the hand
+/// turned 0.5 rad about z (so that the joint's frame is not the model's) and `<axis2>`'s x given
+/// by the flag derives the kernels of the same file with `expressed_in="__model__"`, and
+/// differs from the one without either (x of the joint's frame).
+#[test]
+fn sdf_use_parent_model_frame_is_the_models_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(here().join("ujoint.sdf"))
+        .unwrap()
+        .replace(
+            "<pose relative_to=\"arm\">0 0 0.4 0 0 0</pose>",
+            "<pose relative_to=\"arm\">0 0 0.4 0 0 0.5</pose>",
+        );
+    let axis2 = "<axis2><xyz expressed_in=\"__model__\">1 0 0</xyz></axis2>";
+    assert!(text.contains(axis2) && text.contains("0 0 0.4 0 0 0.5"));
+    let model = |name: &str, axis: &str| {
+        let sdf = text.replace(axis2, axis);
+        std::fs::write(dir.path().join(format!("{name}.sdf")), sdf).unwrap();
+        let toml = dir.path().join(format!("{name}.toml"));
+        std::fs::write(&toml, format!("sdf = \"{name}.sdf\"\n")).unwrap();
+        model_at(&toml)
+    };
+    let expressed = model("expressed", axis2);
+    let flag = model(
+        "flag",
+        "<axis2><xyz>1 0 0</xyz><use_parent_model_frame>true</use_parent_model_frame></axis2>",
+    );
+    let joint = model("joint", "<axis2><xyz>1 0 0</xyz></axis2>");
+    let same = worst_difference(&expressed, &flag);
+    let other = worst_difference(&expressed, &joint);
+    println!("use_parent_model_frame vs expressed_in=__model__ {same:e}; the joint's x {other:e}");
+    assert!(same < 1e-12, "{same:e}");
+    assert!(other > 1e-3, "{other:e}");
+}

@@ -7,7 +7,7 @@
 //! | `<joint type="ball">` in the tree | three coordinates `NAME_x`, `NAME_y`, `NAME_z` (`Rx Ry Rz` about the joint's origin) |
 //! | `<joint type="universal\|revolute2">` in the tree | two coordinates `NAME_1`, `NAME_2`: the turn about `<axis>`, then about `<axis2>` as turned by the first (SDFormat: "two revolute joints connected in series", both axes in the joint's frame), i.e. `J R(axis, q1) R(axis2, q2) J⁻¹`; parallel axes refused |
 //! | `<joint type="screw">` in the tree | one coordinate, the angle `q` about `<axis>`, and the translation along it: `<screw_thread_pitch>` p (m per revolution, right-handed positive) `p q / (2 pi)`, else the deprecated `<thread_pitch>` t (rad/m, left-handed positive) `-q / t` ([`screw_lead`]) |
-//! | `<axis><xyz expressed_in>`, `<axis2>` | the vector turned from the named frame into the joint's |
+//! | `<axis><xyz expressed_in>`, `<axis2>` | the vector turned from the named frame into the joint's (SDF 1.6's `<use_parent_model_frame>true`: the model's frame) |
 //! | `<joint type="fixed">` in the tree | the child's steps only |
 //! | a joint whose child is already in the tree | a loop at the joint's frame: `ball` (ball), `hinge` (revolute, about the axis), `weld` (fixed) |
 //! | a `prismatic`, `universal`, `revolute2` or `screw` joint whose child is already in the tree (no loop kind is such a joint) | it brings the child in (its coordinates), and the joint that brought it in closes the loop instead (as above); refused when that joint is not revolute, ball or fixed, or when the loop hangs below the child (a note says which joint closes) |
@@ -1474,7 +1474,8 @@ fn axis_of<'a, 'i>(cx: &mut Cx<'_>, f: &mut Frames<'a, 'i>, j: Node<'a, 'i>) -> 
 /// The unit vector of a joint's `<axis>` or `<axis2>` (`tag`), in the joint's frame. SDFormat's
 /// `joint.sdf`: the axis "is expressed in the joint frame unless a different frame is expressed
 /// in the expressed_in attribute"; a vector given in another frame (a link, joint or `<frame>`,
-/// `__model__`) is turned into the joint's axes with both frames as posed, every joint at zero.
+/// `__model__`; SDF 1.6's `<use_parent_model_frame>true`, as SDFormat's 1.7 converter does) is
+/// turned into the joint's axes with both frames as posed, every joint at zero.
 /// A component within 1e-12 of zero after the turn is zero (an axis along a coordinate axis
 /// stays one joint step).
 fn axis_in<'a, 'i>(
@@ -1493,7 +1494,15 @@ fn axis_in<'a, 'i>(
         return None;
     };
     let written = x.attribute("expressed_in").filter(|e| !e.is_empty());
-    let frame = written.map(|e| resolve(j, e));
+    // SDF 1.6's `<use_parent_model_frame>` (removed in 1.7, whose converter writes
+    // `expressed_in="__model__"` for it): the axis in the model's frame.
+    let parent_model = child(j, tag)
+        .and_then(|a| child(a, "use_parent_model_frame"))
+        .and_then(|n| n.text())
+        .is_some_and(|t| matches!(t.trim(), "true" | "1"));
+    let frame = written
+        .or(parent_model.then_some("__model__"))
+        .map(|e| resolve(j, e));
     let jname = qname(j);
     if let (Some(e), Some(w)) = (&frame, written)
         && e != "world"
