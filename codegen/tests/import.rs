@@ -14,6 +14,10 @@ fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
+/// The `<inertial>` of the SDF tests' links written in the tests: 1 kg, 0.01 kg m² about each axis.
+const UNIT_INERTIAL: &str = "<inertial><mass>1</mass><inertia><ixx>0.01</ixx><iyy>0.01</iyy>\
+                             <izz>0.01</izz></inertia></inertial>";
+
 fn here() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/import")
 }
@@ -1552,8 +1556,7 @@ fn sdf_universal_joint_closing_a_loop_is_in_the_tree() {
     use rbss_codegen::import::{Format, import_file};
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let inertial = "<inertial><mass>1</mass><inertia><ixx>0.01</ixx><iyy>0.01</iyy>\
-                    <izz>0.01</izz></inertia></inertial>";
+    let inertial = UNIT_INERTIAL;
     std::fs::write(
         d.join("uloop.sdf"),
         format!(
@@ -1638,8 +1641,7 @@ fn sdf_nested_models_are_scopes() {
     use rbss_codegen::import::{Format, import_file};
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let inertial = "<inertial><mass>1</mass><inertia><ixx>0.01</ixx><iyy>0.01</iyy>\
-                    <izz>0.01</izz></inertia></inertial>";
+    let inertial = UNIT_INERTIAL;
     std::fs::write(
         d.join("nested.sdf"),
         format!(
@@ -1715,8 +1717,7 @@ fn sdf_includes_are_nested_models() {
     use rbss_codegen::import::{Format, import_file};
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let inertial = "<inertial><mass>1</mass><inertia><ixx>0.01</ixx><iyy>0.01</iyy>\
-                    <izz>0.01</izz></inertia></inertial>";
+    let inertial = UNIT_INERTIAL;
     std::fs::create_dir_all(d.join("parts")).unwrap();
     std::fs::create_dir_all(d.join("gripper")).unwrap();
     let arm = format!(
